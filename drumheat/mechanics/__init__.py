@@ -1,0 +1,31 @@
+"""drumheat.mechanics: soft-sphere DEM on jax-md neighbour lists.
+
+Contact laws (:mod:`.contact_forces`), neighbour lists with tangential history
+(:mod:`.neighbors`), velocity-Verlet integration with a checked chunked runner
+(:mod:`.integrator`), bed generation (:mod:`.pour`), analysis (:mod:`.analysis`) and the
+exceptions (:mod:`.errors`).
+"""
+
+from drumheat.mechanics.contact_forces import (  # noqa: F401
+    ContactParams,
+    contact_params,
+    critical_time_step,
+    damping_ratio_from_restitution,
+    normal_stiffness_from_youngs,
+    restitution_from_damping_ratio,
+)
+from drumheat.mechanics.errors import (  # noqa: F401
+    DEMError,
+    NeighborListError,
+    NonFiniteError,
+    OverlapError,
+    ParticleEscapeError,
+)
+from drumheat.mechanics.integrator import (  # noqa: F401
+    DEM,
+    Contacts,
+    DEMState,
+    Particles,
+    make_dem,
+    make_particles,
+)

@@ -1,0 +1,142 @@
+"""Motion model ``static``: a resting packing whose contacts are found once from geometry.
+
+weigler-thermal-dem.md section 6.2 (appendix A5.1): the decoupled solver on a fixed contact
+matrix. Here the contacts are pair lists (:mod:`drumheat.thermal.network`) and the balance
+[2.13] is integrated by :func:`integrate_network`.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from drumheat.bed import (group_index, initial_packing, initial_temperatures, make_particles,
+                          output_times, scene_values)
+from drumheat.progress import SimProgress
+from drumheat.scene import Scene, SceneError
+from drumheat.thermal.composer import ThermalModel, make_thermal_model
+from drumheat.thermal.integrate import (ThermalStabilityError, advance_adaptive,
+                                        advance_explicit, check_explicit_step, initial_state)
+from drumheat.thermal.network import ContactNetwork, find_contacts_2d_drum
+from drumheat.trajectory import Trajectory
+
+
+def _concrete(x):
+    try:
+        return float(x)
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError, TypeError):
+        return None
+
+
+def integrate_network(scene: Scene, model: ThermalModel, net: ContactNetwork, y0, t_out,
+                      progress: SimProgress | None = None, t_offset: float = 0.0):
+    """Integrate the thermal state over the output times on a fixed contact network.
+
+    Parameters
+    ----------
+    scene : Scene
+        Supplies the solver choice and tolerances (``[run]``).
+    model, net : ThermalModel, ContactNetwork
+    y0 : dict
+        State at ``t_out[0]`` (:func:`drumheat.thermal.integrate.initial_state`).
+    t_out : array_like (n_out,)
+        Output times, s; ``t_out[0]`` is the start.
+    progress : SimProgress, optional
+        Updated with the absolute time ``t_offset + t`` after every output interval.
+
+    Returns
+    -------
+    states : list of dict
+        The state at every output time (``states[0] is y0``). Differentiable.
+
+    Raises
+    ------
+    SceneError
+        If the explicit solver's step ``run.dt`` exceeds the stability limit.
+    """
+    run = scene.run
+    dt = None
+    if run.solver == "explicit":
+        limit = _concrete(model.stability_limit(net))
+        try:
+            dt = check_explicit_step(model, net, run.dt) if limit is not None else (
+                run.dt or np.inf)
+        except ThermalStabilityError as err:
+            raise SceneError("run.dt", run.dt, str(err), scene.name) from None
+    states = [y0]
+    y = y0
+    for t0, t1 in zip(t_out[:-1], t_out[1:]):
+        if run.solver == "explicit":
+            y = advance_explicit(model, net, y, float(t0), float(t1), dt)
+        else:
+            y = advance_adaptive(model, net, y, jnp.asarray(t0, float), jnp.asarray(t1, float),
+                                 run.rtol, run.atol, implicit=run.solver == "implicit")
+        states.append(y)
+        if progress is not None:
+            progress.update_to(t_offset + t1)
+    return states
+
+
+def stack_states(states, accounts):
+    """Stack a list of states into ``T (n_out, N)`` and ``{account: (n_out,)}``."""
+    T = jnp.stack([s["T"] for s in states])
+    Q = {a: jnp.stack([s["Q"][a] for s in states]) for a in accounts}
+    return T, Q
+
+
+class StaticBed:
+    """A resting bed: packing and contacts built once, temperatures solved for any parameters.
+
+    Parameters
+    ----------
+    scene : Scene
+
+    Attributes
+    ----------
+    packing : drumheat.mechanics.deposition.Packing
+    net : ContactNetwork
+        Particle-particle contacts and contacts with the drum shell (wall id 0).
+    """
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.packing = initial_packing(scene)
+        pairs, wall = find_contacts_2d_drum(self.packing.position, self.packing.diameter,
+                                            scene.drum.diameter,
+                                            scene.packing.contact_tolerance)
+        self.pairs, self.wall_particles = pairs, wall
+        self.net = ContactNetwork.from_arrays(pairs, wall)
+        self.t_out = output_times(scene)
+
+    def model(self, params=None) -> tuple[ThermalModel, jax.Array]:
+        """Thermal model and initial temperatures for parameter overrides ``params``."""
+        value = scene_values(self.scene, params)
+        model = make_thermal_model(self.scene, make_particles(self.scene, value), value)
+        return model, initial_temperatures(self.scene, value)
+
+    def solve(self, params=None, progress: SimProgress | None = None):
+        """Temperatures ``(n_out, N)`` and exchanged heat ``{account: (n_out,)}``.
+
+        Differentiable with respect to the values in ``params`` (dotted scene keys).
+        """
+        model, T0 = self.model(params)
+        states = integrate_network(self.scene, model, self.net, initial_state(model, T0),
+                                   self.t_out, progress)
+        return stack_states(states, model.accounts)
+
+    def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
+        """Run the scene and collect what the result files need."""
+        model, _ = self.model(params)
+        with SimProgress(self.scene.run.duration, progress) as bar:
+            T, Q = self.solve(params, bar)
+        n_out = len(self.t_out)
+        d = self.packing.diameter
+        return Trajectory(
+            t=self.t_out, T=np.asarray(T), Q={k: np.asarray(v) for k, v in Q.items()},
+            position=np.broadcast_to(self.packing.position, (n_out,) + self.packing.position.shape),
+            diameter=d, mass=np.asarray(model.particles.mass),
+            capacity=np.asarray(model.particles.capacity), group=group_index(self.scene),
+            n_contacts=np.full(n_out, len(self.pairs)),
+            n_wall_contacts=np.full(n_out, len(self.wall_particles)),
+            wall_area=np.full(n_out, float(np.sum(d[self.wall_particles] ** 2))))

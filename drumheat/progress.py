@@ -1,0 +1,41 @@
+"""Progress bar over simulated time, with ETA (tqdm), shown for runs longer than a moment."""
+
+from __future__ import annotations
+
+import sys
+
+from tqdm.auto import tqdm
+
+
+class SimProgress:
+    """Context manager: ``with SimProgress(duration, enabled) as p: p.update_to(t)``.
+
+    The bar appears only after ``delay`` seconds, so short runs stay quiet.
+    """
+
+    def __init__(self, duration: float, enabled: bool | None = True, desc: str = "simulating",
+                 delay: float = 2.0):
+        self.duration = float(duration)
+        self.enabled = True if enabled is None else bool(enabled)
+        self.desc, self.delay = desc, delay
+        self.bar = None
+        self._t = 0.0
+
+    def __enter__(self):
+        if self.enabled:
+            self.bar = tqdm(total=self.duration, desc=self.desc, unit="s", delay=self.delay,
+                            file=sys.stderr, dynamic_ncols=True,
+                            bar_format="{desc}: {percentage:3.0f}%|{bar}| t = {n:.4g} / "
+                                       "{total:.4g} s [{elapsed}<{remaining}]")
+        return self
+
+    def update_to(self, t: float) -> None:
+        """Report that the simulation reached time ``t`` (s)."""
+        if self.bar is not None:
+            self.bar.update(float(t) - self._t)
+        self._t = float(t)
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.close()
+        return False

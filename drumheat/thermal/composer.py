@@ -1,0 +1,135 @@
+"""Compose the thermal model of a scene from exactly the effects it lists.
+
+Each effect is an equinox module in its own file (``contact.py``, ``wall.py``, ``loss.py``)
+with one method, ``heat_flow(T, particles, net) -> W into each particle``, and a class attribute
+``account`` naming the outside reservoir it exchanges with (``None`` for exchanges inside the
+bed). The registry below maps a ``[heat.<name>]`` table to the function building the effect;
+adding an effect is one new file plus one entry here. Effects whose table is absent are not
+built, so they are not in the traced program at all.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import equinox as eqx
+import jax.numpy as jnp
+from jax import Array
+
+from drumheat.models import schluender
+from drumheat.thermal.contact import ContactConduction
+from drumheat.thermal.loss import HeatLoss
+from drumheat.thermal.network import ContactNetwork
+from drumheat.thermal.particles import ThermalParticles
+from drumheat.thermal.wall import WallConduction
+
+#: A getter ``value(dotted_key)`` returning a (possibly traced) scene value.
+ValueFn = Callable[[str], object]
+
+
+def _schluender(scene, value, d_p):
+    """(alpha_wp, alpha_pp) from weigler eqs. [2.8]-[2.10] for the scene's gas (App. A3)."""
+    from drumheat.materials import gas
+
+    if scene.gas is not None:
+        g = gas(scene.gas.material)
+        T, p = value("gas.temperature"), value("gas.pressure")
+        lam = value("gas.conductivity") if scene.gas.conductivity is not None else g.conductivity
+    else:  # Table 8-1 conditions
+        g = gas("air")
+        T, p, lam = 303.15, 101325.0, g.conductivity
+    return schluender.contact_coefficients(d_p, T=T, p=p, conductivity=lam,
+                                           heat_capacity=g.heat_capacity,
+                                           molar_mass=g.molar_mass, C=g.accommodation_constant)
+
+
+def _mean_diameter(scene):
+    n = sum(g.count for g in scene.groups)
+    return sum(g.count * g.diameter for g in scene.groups) / n
+
+
+def _contact(scene, value: ValueFn) -> ContactConduction:
+    cfg = scene.heat.contact
+    if cfg.model == "constant":
+        alpha = value("heat.contact.alpha")
+    else:
+        alpha = _schluender(scene, value, _mean_diameter(scene))[1]
+    return ContactConduction(alpha=jnp.asarray(alpha, float))
+
+
+def _wall(scene, value: ValueFn) -> WallConduction:
+    cfg = scene.heat.wall
+    if cfg.model == "constant":
+        alpha = value("heat.wall.alpha")
+    else:
+        alpha = _schluender(scene, value, _mean_diameter(scene))[0]
+    return WallConduction(alpha=jnp.asarray(alpha, float),
+                          wall_temperature=jnp.atleast_1d(jnp.asarray(
+                              value("drum.wall_temperature"), float)))
+
+
+def _loss(scene, value: ValueFn) -> HeatLoss:
+    return HeatLoss(alphaA=jnp.asarray(value("heat.loss.alphaA"), float),
+                    gas_temperature=jnp.asarray(value("gas.temperature"), float))
+
+
+#: ``[heat.<name>]`` -> builder(scene, value) of the effect module.
+EFFECTS: dict[str, Callable] = {
+    "contact": _contact,
+    "wall": _wall,
+    "loss": _loss,
+}
+
+
+class ThermalModel(eqx.Module):
+    """Particles plus the effects a scene switches on.
+
+    Attributes
+    ----------
+    particles : ThermalParticles
+    effects : tuple of effect modules
+    """
+
+    particles: ThermalParticles
+    effects: tuple
+
+    @property
+    def accounts(self) -> tuple[str, ...]:
+        """Names of the outside reservoirs the bed exchanges heat with ("wall", "gas", ...)."""
+        return tuple(sorted({e.account for e in self.effects if e.account is not None}))
+
+    def heat_flows(self, T: Array, net: ContactNetwork) -> tuple[Array, dict[str, Array]]:
+        """Total heat flow into each particle (W, shape (N,)) and the heat flow from each
+        outside reservoir into the bed (W, scalars by account)."""
+        total = jnp.zeros_like(T)
+        external = {a: jnp.zeros((), T.dtype) for a in self.accounts}
+        for effect in self.effects:
+            q = effect.heat_flow(T, self.particles, net)
+            total = total + q
+            if effect.account is not None:
+                external[effect.account] = external[effect.account] + jnp.sum(q)
+        return total, external
+
+    def conductance_sum(self, net: ContactNetwork) -> Array:
+        """Sum over all pipes of alpha A at each particle, W/K (weigler eq. [2.2])."""
+        s = jnp.zeros_like(self.particles.diameter)
+        for effect in self.effects:
+            s = s + effect.conductance_sum(self.particles, net)
+        return s
+
+    def stability_limit(self, net: ContactNetwork) -> Array:
+        """Explicit (forward Euler) thermal step limit ``min_i m_i c_i / sum(alpha A)_i``, s.
+
+        weigler-thermal-dem.md eq. [2.2]. Below this step each explicit update is a convex
+        combination of old temperatures, so the maximum principle holds; ``inf`` when nothing
+        couples the particles.
+        """
+        g = self.conductance_sum(net)
+        return jnp.min(jnp.where(g > 0, self.particles.capacity / jnp.where(g > 0, g, 1.0),
+                                 jnp.inf))
+
+
+def make_thermal_model(scene, particles: ThermalParticles, value: ValueFn) -> ThermalModel:
+    """Build the thermal model of ``scene`` with exactly the effects it lists."""
+    effects = tuple(EFFECTS[name](scene, value) for name in scene.heat.effects())
+    return ThermalModel(particles=particles, effects=effects)

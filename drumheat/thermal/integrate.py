@@ -1,0 +1,104 @@
+"""Time integration of the particle energy balances (weigler-thermal-dem.md eqs. [2.7], [2.13]).
+
+The state is ``{"T": (N,) K, "Q": {account: J}}``: particle temperatures plus the cumulative
+heat received from each outside reservoir, so that every run can report its own energy balance.
+
+Two families:
+
+* adaptive (diffrax): ``Tsit5`` (explicit Runge-Kutta with error control) or ``Kvaerno5``
+  (implicit, for stiff scenes such as very large wall coefficients), tolerances from the scene;
+* explicit: fixed-step forward Euler whose step must respect ``dt < m c / sum(alpha A)``
+  (eq. [2.2]); a larger step is refused, never run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from drumheat.thermal.composer import ThermalModel
+from drumheat.thermal.network import ContactNetwork
+
+
+class ThermalStabilityError(ValueError):
+    """An explicit thermal step above the stability limit was asked for."""
+
+
+def initial_state(model: ThermalModel, T0) -> dict:
+    """ODE state at t = 0: temperatures and zero exchanged heat per account."""
+    T0 = jnp.asarray(T0, float)
+    return {"T": T0, "Q": {a: jnp.zeros((), T0.dtype) for a in model.accounts}}
+
+
+def _vector_field(t, y, args):
+    model, net = args
+    q, external = model.heat_flows(y["T"], net)
+    return {"T": q / model.particles.capacity, "Q": external}
+
+
+@eqx.filter_jit
+def advance_adaptive(model: ThermalModel, net: ContactNetwork, y, t0, t1, rtol, atol,
+                     implicit: bool = False, max_steps: int = 100_000):
+    """Advance the state from t0 to t1 with diffrax (Tsit5, or Kvaerno5 if ``implicit``)."""
+    solver = diffrax.Kvaerno5() if implicit else diffrax.Tsit5()
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(_vector_field), solver, t0, t1, dt0=None, y0=y, args=(model, net),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        saveat=diffrax.SaveAt(t1=True), max_steps=max_steps)
+    return jax.tree_util.tree_map(lambda a: a[-1], sol.ys)
+
+
+def explicit_steps(t0, t1, dt) -> tuple[int, float]:
+    """Number of equal explicit steps covering [t0, t1] with steps <= dt, and that step."""
+    n = max(1, math.ceil((t1 - t0) / dt - 1e-9))
+    return n, (t1 - t0) / n
+
+
+@eqx.filter_jit
+def _euler_scan(model, net, y, h, n_steps: int):
+    def body(y, _):
+        dy = _vector_field(None, y, (model, net))
+        return jax.tree_util.tree_map(lambda a, b: a + h * b, y, dy), None
+
+    y, _ = jax.lax.scan(body, y, None, length=n_steps)
+    return y
+
+
+def advance_explicit(model: ThermalModel, net: ContactNetwork, y, t0: float, t1: float,
+                     dt: float):
+    """Advance from t0 to t1 with forward Euler steps no larger than ``dt``.
+
+    The caller checks ``dt`` against :meth:`ThermalModel.stability_limit` first
+    (:func:`check_explicit_step`).
+    """
+    n, h = explicit_steps(t0, t1, dt)
+    return _euler_scan(model, net, y, h, n)
+
+
+def check_explicit_step(model: ThermalModel, net: ContactNetwork, dt: float | None,
+                        safety: float = 0.5) -> float:
+    """Explicit step to use: ``dt`` if below the stability limit, else refuse.
+
+    Parameters
+    ----------
+    dt : float or None
+        Requested step, s; ``None`` picks ``safety`` times the limit.
+
+    Raises
+    ------
+    ThermalStabilityError
+        If ``dt`` exceeds ``m c / sum(alpha A)`` (weigler-thermal-dem.md eq. [2.2]).
+    """
+    limit = float(model.stability_limit(net))
+    if dt is None:
+        return safety * limit if math.isfinite(limit) else math.inf
+    if dt > limit:
+        raise ThermalStabilityError(
+            f"explicit thermal step dt = {dt:.4g} s exceeds the stability limit "
+            f"min(m c / sum(alpha A)) = {limit:.4g} s (weigler eq. [2.2]); use dt <= "
+            f"{limit:.4g} s or an adaptive/implicit solver")
+    return dt

@@ -1,0 +1,108 @@
+"""Sparse contact networks: the pipes through which heat flows.
+
+Contacts are stored as pair lists, never as a dense N x N matrix (the thesis' contact matrix CM
+of weigler-thermal-dem.md eq. [2.13] is the graph Laplacian of these pairs). Arrays have a fixed
+capacity so that a changing network keeps the shapes of a jitted program; unused slots carry
+weight 0.
+
+The weight of a contact is the fraction of the thermal step during which it existed (1 for a
+resting bed; between 0 and 1 when the thermal step spans several mechanical steps).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+
+class ContactNetwork(eqx.Module):
+    """Particle-particle and particle-wall contacts.
+
+    Attributes
+    ----------
+    pair_i, pair_j : int array, shape (P,)
+        Particle indices of each particle-particle contact, each contact once.
+    pair_weight : float array, shape (P,)
+        Contact-time fraction in [0, 1]; 0 marks an unused slot.
+    wall_particle : int array, shape (W,)
+        Particle index of each particle-wall contact.
+    wall_id : int array, shape (W,)
+        Index of the wall touched (into the wall-temperature array of the wall effect).
+    wall_weight : float array, shape (W,)
+        Contact-time fraction in [0, 1]; 0 marks an unused slot.
+    """
+
+    pair_i: Array
+    pair_j: Array
+    pair_weight: Array
+    wall_particle: Array
+    wall_id: Array
+    wall_weight: Array
+
+    @property
+    def n_pairs(self) -> Array:
+        """Number of particle-particle contacts (weights summed)."""
+        return jnp.sum(self.pair_weight)
+
+    @property
+    def n_wall(self) -> Array:
+        """Number of particle-wall contacts (weights summed)."""
+        return jnp.sum(self.wall_weight)
+
+    @classmethod
+    def from_arrays(cls, pairs, wall_particles, wall_ids=None) -> "ContactNetwork":
+        """Build a network of permanent contacts (weight 1) from host arrays.
+
+        Parameters
+        ----------
+        pairs : array_like, shape (P, 2)
+        wall_particles : array_like, shape (W,)
+        wall_ids : array_like, shape (W,), optional
+            Defaults to wall 0 for every wall contact.
+        """
+        pairs = np.asarray(pairs, dtype=np.int32).reshape(-1, 2)
+        wp = np.asarray(wall_particles, dtype=np.int32).reshape(-1)
+        wid = np.zeros_like(wp) if wall_ids is None else np.asarray(wall_ids, np.int32)
+        return cls(jnp.asarray(pairs[:, 0]), jnp.asarray(pairs[:, 1]),
+                   jnp.ones(len(pairs)), jnp.asarray(wp), jnp.asarray(wid), jnp.ones(len(wp)))
+
+
+def find_contacts_2d_drum(position, diameter, drum_diameter, tolerance=0.01):
+    """Contacts of a resting packing in a drum, from geometry.
+
+    Two particles touch when the gap between their surfaces is at most ``tolerance`` times the
+    smaller diameter (weigler-thermal-dem.md eq. [2.4] with a gap tolerance, as needed for
+    packings from measured coordinates); a particle touches the drum shell when its gap to the
+    shell is at most ``tolerance`` times its diameter. Uses a k-d tree (no N x N array).
+
+    Parameters
+    ----------
+    position : array_like, shape (N, dim)
+        Centres, m (only x and y matter for the shell).
+    diameter : array_like, shape (N,)
+    drum_diameter : float
+    tolerance : float
+        Gap tolerance as a fraction of the (smaller) diameter.
+
+    Returns
+    -------
+    pairs : ndarray, shape (P, 2)
+    wall_particles : ndarray, shape (W,)
+    """
+    from scipy.spatial import cKDTree
+
+    position = np.asarray(position, float)
+    diameter = np.asarray(diameter, float)
+    tree = cKDTree(position)
+    pairs = np.array(sorted(tree.query_pairs(diameter.max() * (1 + tolerance))), dtype=int)
+    if len(pairs):
+        i, j = pairs.T
+        gap = np.linalg.norm(position[i] - position[j], axis=1) - 0.5 * (diameter[i] + diameter[j])
+        pairs = pairs[gap <= tolerance * np.minimum(diameter[i], diameter[j])]
+    pairs = pairs.reshape(-1, 2)
+    r_xy = np.hypot(position[:, 0], position[:, 1])
+    wall_gap = 0.5 * drum_diameter - r_xy - 0.5 * diameter
+    wall_particles = np.nonzero(wall_gap <= tolerance * diameter)[0]
+    return pairs, wall_particles

@@ -1,0 +1,47 @@
+"""What a motion model hands back to the runner."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Trajectory:
+    """Particle temperatures and exchanged heat at the output times.
+
+    Attributes
+    ----------
+    t : ndarray (n_out,)
+        Output times, s.
+    T : ndarray (n_out, N)
+        Particle temperatures, K.
+    Q : dict of ndarray (n_out,)
+        Cumulative heat received from each outside reservoir ("wall", "gas", ...), J.
+    position : ndarray (n_out, N, dim)
+        Particle centres, m.
+    diameter, mass, capacity : ndarray (N,)
+        m, kg, J/K.
+    group : ndarray of int (N,)
+    n_contacts, n_wall_contacts : ndarray (n_out,)
+        Particle-particle and particle-wall contacts at (or averaged over the interval ending
+        at) each output time.
+    wall_area : ndarray (n_out,)
+        Transfer area of eq. [1.10], ``sum of d_p^2 over wall contacts`` (thesis App. A7), m2.
+    extra : dict
+        Further columns a motion model provides.
+    """
+
+    t: np.ndarray
+    T: np.ndarray
+    Q: dict
+    position: np.ndarray
+    diameter: np.ndarray
+    mass: np.ndarray
+    capacity: np.ndarray
+    group: np.ndarray
+    n_contacts: np.ndarray
+    n_wall_contacts: np.ndarray
+    wall_area: np.ndarray
+    extra: dict = field(default_factory=dict)

@@ -1,0 +1,5 @@
+import os
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import drumheat  # noqa: E402,F401  (enables float64)
