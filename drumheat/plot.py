@@ -132,8 +132,10 @@ def plot_snapshot(result, index=-1, ax=None, vmin=None, vmax=None):
     ax.set_xlabel("x / m")
     ax.set_ylabel("y / m")
     ax.set_title(f"{result.scene.name}, t = {traj.t[index]:.4g} s")
-    cb = fig.colorbar(coll, ax=ax, label="temperature / °C")
-    cb.ax.secondary_yaxis(2.8, functions=(lambda c: c + C0, lambda k: k - C0)).set_ylabel("K")
+    cb = fig.colorbar(coll, ax=ax, pad=0.16)
+    cb.set_label("temperature / °C")
+    kelvin = cb.ax.secondary_yaxis("left", functions=(lambda c: c + C0, lambda k: k - C0))
+    kelvin.set_ylabel("K")
     fig.tight_layout()
     return fig
 

@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import importlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,23 +14,19 @@ import numpy as np
 import pandas as pd
 
 from drumheat import observe
-from drumheat.scene import Scene, load_scene
+from drumheat.scene import MOTION_MODELS, Scene, load_scene
 from drumheat.trajectory import Trajectory
-
-
-def _motion_models():
-    from drumheat.mixing.static import StaticBed
-
-    return {"static": StaticBed}
 
 
 def make_motion(scene: Scene):
     """The motion-model object of a scene (``StaticBed``, ...); it builds packing and contacts.
 
-    Every motion model offers ``solve(params) -> (T, Q)`` (differentiable) and
-    ``trajectory(params, progress) -> Trajectory``.
+    The registry is :data:`drumheat.scene.MOTION_MODELS`. Every motion model offers
+    ``solve(params) -> (T, Q)`` (differentiable) and ``trajectory(params, progress) ->
+    Trajectory``.
     """
-    return _motion_models()[scene.motion.model](scene)
+    module, cls = MOTION_MODELS[scene.motion.model].split(":")
+    return getattr(importlib.import_module(module), cls)(scene)
 
 
 @dataclass

@@ -182,15 +182,29 @@ class HeatConfig:
         return tuple(f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None)
 
 
-MOTION_MODELS = ("static",)
+#: Motion models and the class implementing each ("module:Class", imported on use).
+MOTION_MODELS = {
+    "static": "drumheat.mixing.static:StaticBed",
+    "random": "drumheat.mixing.random:RandomBed",
+}
 
 
 @dataclass(frozen=True)
 class MotionConfig:
     """``[motion]``: how the particles move."""
 
-    model: str = spec("static", choices=MOTION_MODELS,
-                      doc="'static': a resting packing, contacts found once from geometry.")
+    model: str = spec("static", choices=tuple(MOTION_MODELS),
+                      doc="'static': a resting packing, contacts found once from geometry; "
+                          "'random': the semi-discrete penetration model, a resting packing "
+                          "whose particle temperatures are re-mixed every t_R "
+                          "(weigler-thermal-dem.md section 6.1, 11.1).")
+    t_R: Optional[float] = spec(None, unit="s", gt=0,
+                                doc="Re-mixing period of model 'random' (the rest time of the "
+                                    "penetration model, weigler eq. [1.1]).")
+    remix: str = spec("permute", choices=("permute", "mean"),
+                      doc="Model 'random': 'permute' shuffles the temperatures over the fixed "
+                          "positions (the thesis' choice), 'mean' sets every particle to the "
+                          "bed mean.")
 
 
 @dataclass(frozen=True)
@@ -444,10 +458,13 @@ def _check_consistency(s: Scene) -> None:
     if s.heat.loss is not None and s.gas is None:
         raise SceneError("gas.temperature", _MISSING_VALUE,
                          "[heat.loss] needs the gas temperature, in K", n)
+    if s.motion.model == "random" and s.motion.t_R is None:
+        raise SceneError("motion.t_R", _MISSING_VALUE, "model 'random' needs the re-mixing "
+                         "period t_R, a number > 0 in s", n)
     if s.packing.method == "file" and s.packing.file is None:
         raise SceneError("packing.file", _MISSING_VALUE, "method 'file' needs a path to an .npz "
                          "packing", n)
-    if s.motion.model == "static" and s.dim == 3 and s.packing.method != "file":
+    if s.motion.model in ("static", "random") and s.dim == 3 and s.packing.method != "file":
         raise SceneError("dim", 3, "the static deposition packing is 2D; a 3D static bed needs "
                          "packing.method = 'file'", n)
 

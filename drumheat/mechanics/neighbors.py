@@ -125,10 +125,11 @@ class NeighborSetup:
         """Allocate a neighbour list at ``position`` (not jittable: it sizes the buffers).
 
         The pair capacity is ``capacity_multiplier`` times the current number of pairs, and at
-        least ``min_capacity``.
+        least ``min_capacity`` (and at least 1).
         """
         pos = self.to_box(position)
         nbrs = self.neighbor_fns.allocate(pos)
+        min_capacity = max(int(min_capacity), 1)  # never a zero-size pair buffer
         if nbrs.max_occupancy < min_capacity:
             import dataclasses
             nbrs = dataclasses.replace(nbrs, max_occupancy=int(min_capacity))

@@ -89,7 +89,8 @@ for _reg, (_a, _b, _c, _d) in REGION_PATTERNS.items():
 class ContactLengths(NamedTuple):
     """Contact lengths of the bed in one section (per unit drum length).
 
-    All fields have the shape of the ``delta`` input. Lengths in the unit of ``R1`` (m).
+    All fields have the shape of the ``delta`` input (NumPy arrays for concrete inputs, JAX
+    arrays when traced). Lengths in the unit of ``R1`` (m).
 
     Attributes
     ----------
@@ -270,7 +271,25 @@ def _section_scalar(delta, R1, R2, fill, gamma, alpha):
     return P1, P2, Wo, Wi, l_SG, c, region, code
 
 
-_section_vmapped = jax.jit(jax.vmap(_section_scalar, in_axes=(0, None, None, None, None, None)))
+_section_vmapped_jit = jax.jit(jax.vmap(_section_scalar, in_axes=(0, None, None, None, None, None)))
+
+
+_CHUNK = 256
+
+
+def _section_vmapped(delta, *params):
+    """Evaluate on a flat array of angles in chunks of one fixed length, so that one compiled
+    executable serves every call (compiling costs seconds, a chunk well under a millisecond).
+    With concrete inputs, padding and joining are done in NumPy (no per-shape compiles either)."""
+    traced = any(isinstance(v, jax.core.Tracer) for v in (delta, *params))
+    xp = jnp if traced else np
+    n = delta.shape[0]
+    m = -(-max(n, 1) // _CHUNK) * _CHUNK
+    padded = xp.concatenate([delta, xp.zeros(m - n, delta.dtype)]) if m > n else delta
+    parts = [_section_vmapped_jit(padded[i:i + _CHUNK], *params) for i in range(0, m, _CHUNK)]
+    if not traced:
+        parts = [tuple(np.asarray(o) for o in p) for p in parts]
+    return tuple(xp.concatenate([p[k] for p in parts])[:n] for k in range(len(parts[0])))
 
 
 def _check_inputs(R1, R2, fill, gamma_deg, alpha_deg):
@@ -323,23 +342,30 @@ def contact_lengths(delta_deg, *, R1, R2, fill, gamma_deg, alpha_deg=45.0) -> Co
         ``delta_deg``.
     """
     _check_inputs(R1, R2, fill, gamma_deg, alpha_deg)
-    d = jnp.asarray(delta_deg, dtype=jnp.float64)
+    xp = jnp if isinstance(delta_deg, jax.core.Tracer) else np
+    d = xp.asarray(delta_deg, dtype=xp.float64)
     shape = d.shape
     out = _section_vmapped(
-        jnp.deg2rad(d.reshape(-1)),
-        jnp.asarray(R1, jnp.float64),
-        jnp.asarray(R2, jnp.float64),
-        jnp.asarray(fill, jnp.float64),
-        jnp.deg2rad(jnp.asarray(gamma_deg, jnp.float64)),
-        jnp.deg2rad(jnp.asarray(alpha_deg, jnp.float64)),
+        xp.deg2rad(d.reshape(-1)),
+        *(_as_param(v) for v in (R1, R2, fill)),
+        _as_param(gamma_deg, deg=True),
+        _as_param(alpha_deg, deg=True),
     )
     return ContactLengths(*(o.reshape(shape) for o in out[:7]))
 
 
+def _as_param(v, deg=False):
+    if isinstance(v, jax.core.Tracer):
+        return jnp.deg2rad(v) if deg else v
+    v = np.float64(v)
+    return np.deg2rad(v) if deg else v
+
+
 def _pattern_code(delta_deg, R1, R2, fill, gamma_deg, alpha_deg):
-    d = jnp.asarray(delta_deg, dtype=jnp.float64).reshape(-1)
+    d = np.asarray(delta_deg, dtype=np.float64).reshape(-1)
     out = _section_vmapped(
-        jnp.deg2rad(d), float(R1), float(R2), float(fill), math.radians(gamma_deg), math.radians(alpha_deg)
+        np.deg2rad(d), *(_as_param(v) for v in (R1, R2, fill)),
+        _as_param(gamma_deg, deg=True), _as_param(alpha_deg, deg=True),
     )
     return np.asarray(out[7])
 
@@ -394,8 +420,9 @@ def drum_contact_lengths(delta_deg, *, R1, R2, fill, gamma_deg, alpha_deg=45.0) 
     if abs(n_sec - round(n_sec)) > 1e-9:
         raise ValueError(f"alpha_deg = {alpha_deg}: must divide 360 for a whole drum.")
     n_sec = int(round(n_sec))
-    d = jnp.asarray(delta_deg, jnp.float64)
-    dd = d[..., None] + alpha_deg * jnp.arange(n_sec)
+    xp = jnp if isinstance(delta_deg, jax.core.Tracer) else np
+    d = xp.asarray(delta_deg, xp.float64)
+    dd = d[..., None] + alpha_deg * xp.arange(n_sec)
     cl = contact_lengths(dd, R1=R1, R2=R2, fill=fill, gamma_deg=gamma_deg, alpha_deg=alpha_deg)
     out = {k: getattr(cl, k).sum(axis=-1) for k in ("P1", "P2", "Wo", "Wi", "l_SG")}
     return _with_variants(out)
@@ -608,7 +635,7 @@ def plot_bed(delta_deg, *, R1, R2, fill, gamma_deg, alpha_deg=45.0, ax=None, all
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"delta = {delta_deg:g} deg (section 1 highlighted)")
+    ax.set_title(f"delta = {delta_deg:g} deg")
     return fig
 
 

@@ -17,6 +17,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 
@@ -39,6 +41,7 @@ def _g(lam, Bi):
     return lam * jnp.cos(lam) + (Bi - 1.0) * jnp.sin(lam)
 
 
+@functools.partial(jax.jit, static_argnames="n_terms")
 def sphere_eigenvalues(Bi, n_terms=60):
     """Positive roots ``lambda_k`` of ``1 - lambda cot(lambda) = Bi`` (Bi = alpha R / lambda).
 
@@ -82,6 +85,7 @@ def sphere_series_coefficients(lam):
     return 4.0 * (jnp.sin(lam) - lam * jnp.cos(lam)) / (2.0 * lam - jnp.sin(2.0 * lam))
 
 
+@functools.partial(jax.jit, static_argnames="n_terms")
 def sphere_temperature(r_over_R, Fo, Bi, T0, T_inf, n_terms=60):
     """Temperature in a sphere cooled (or heated) by convection, uniform start.
 
@@ -105,6 +109,7 @@ def sphere_temperature(r_over_R, Fo, Bi, T0, T_inf, n_terms=60):
     return T_inf + (T0 - T_inf) * theta
 
 
+@functools.partial(jax.jit, static_argnames="n_terms")
 def sphere_mean_temperature(Fo, Bi, T0, T_inf, n_terms=60):
     """Volume-mean temperature of the convectively cooled sphere.
 

@@ -20,8 +20,10 @@ trapezoidal rules (no adaptivity), so ``jit``/``grad``/``vmap`` work.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -74,6 +76,7 @@ def _sqrt_pos(x):
     return jnp.sqrt(jnp.maximum(x, _TINY))
 
 
+@functools.partial(jax.jit, static_argnames="n_quad")
 def disc_solid_angle(h, a, rho, n_quad=96):
     """Solid angle (sr) of a disc of radius a seen from height h, radial offset rho.
 
@@ -93,12 +96,15 @@ def disc_solid_angle(h, a, rho, n_quad=96):
     """
     h, a, rho = jnp.broadcast_arrays(*(jnp.asarray(x, dtype=float) for x in (h, a, rho)))
     h = jnp.abs(h)[..., None]
+    inside = rho < a
     a = a[..., None]
-    rho_ = rho[..., None]
+    # double-where: each branch only ever sees arguments valid for it (finite gradients)
+    rho_in = jnp.where(inside, rho, 0.0)[..., None]
+    rho_ = jnp.where(inside, 2.0 * a[..., 0], rho)[..., None]
 
     # inside, trapezoid on [0, 2 pi)
     phi = 2.0 * jnp.pi * jnp.arange(2 * n_quad) / (2 * n_quad)
-    R = -rho_ * jnp.cos(phi) + _sqrt_pos(a**2 - rho_**2 * jnp.sin(phi) ** 2)
+    R = -rho_in * jnp.cos(phi) + _sqrt_pos(a**2 - rho_in**2 * jnp.sin(phi) ** 2)
     f_in = 1.0 - h / _sqrt_pos(h**2 + R**2)
     omega_in = jnp.mean(f_in, axis=-1) * 2.0 * jnp.pi
 
@@ -115,7 +121,7 @@ def disc_solid_angle(h, a, rho, n_quad=96):
     g = h / _sqrt_pos(h**2 + Rm**2) - h / _sqrt_pos(h**2 + Rp**2)
     omega_out = jnp.sum(g * phim * jnp.cos(u) * wu, axis=-1)
 
-    return jnp.where(rho < a[..., 0], omega_in, omega_out)
+    return jnp.where(inside, omega_in, omega_out)
 
 
 def sphere_to_disc(h, a, rho=0.0, n_quad=96):
