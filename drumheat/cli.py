@@ -42,6 +42,25 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_animate(args) -> int:
+    from drumheat.animate import AnimationError, animate
+
+    try:
+        out = animate(args.result_dir, out=args.out, fps=args.fps, fmt=args.format)
+    except AnimationError as err:
+        return _fail(str(err))
+    print(f"animation in {out}")
+    return 0
+
+
+def _cmd_export_vtk(args) -> int:
+    from drumheat.vtk_export import export_vtk
+
+    pvd = export_vtk(args.result_dir, out_dir=args.out, binary=not args.ascii)
+    print(f"ParaView files in {pvd.parent}/ (open {pvd.name}; walls in walls.vtp)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="drumheat", description="Thermal DEM of particle beds.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -55,6 +74,23 @@ def build_parser() -> argparse.ArgumentParser:
                         "groups.0.temperature=300 (repeatable)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
+    a = sub.add_parser("animate", help="animate a result folder: the drum coloured by "
+                                       "temperature, with a clock (GIF or MP4)")
+    a.add_argument("result_dir", metavar="RESULT_DIR",
+                   help="result folder written by 'drumheat run' (particles.npz, scene.toml)")
+    a.add_argument("--out", help="output file (default RESULT_DIR/animation.gif); a .mp4 "
+                                 "name writes MP4 (needs imageio-ffmpeg)")
+    a.add_argument("--fps", type=float, default=10.0, help="frames per second (default 10)")
+    a.add_argument("--format", choices=("gif", "mp4"), default=None,
+                   help="file format (default: from the --out suffix, else gif)")
+    a.set_defaults(func=_cmd_animate)
+    v = sub.add_parser("export-vtk", help="write a result folder as ParaView files (.vtp "
+                                          "series, .pvd, walls.vtp)")
+    v.add_argument("result_dir", metavar="RESULT_DIR",
+                   help="result folder written by 'drumheat run' (particles.npz, scene.toml)")
+    v.add_argument("--out", help="output folder (default RESULT_DIR/vtk)")
+    v.add_argument("--ascii", action="store_true", help="ASCII instead of base64 binary data")
+    v.set_defaults(func=_cmd_export_vtk)
     return p
 
 

@@ -50,8 +50,9 @@ def test_restitution_conversion_roundtrip():
 
 @pytest.mark.parametrize("e", [0.5, 0.8])
 def test_head_on_collision_restitution(e):
-    """Default convention: the requested e comes out (small dt: safety factor 0.01)."""
-    assert _collide(e, "no_attraction", 0.01) == pytest.approx(e, abs=1e-3)
+    """Default convention: the requested e comes out (small dt: safety factor 0.005; the error
+    is first order in dt, see drumheat/mechanics/integrator.py)."""
+    assert _collide(e, "no_attraction", 0.005) == pytest.approx(e, abs=1e-3)
 
 
 def test_head_on_collision_linear_convention_predicted():
@@ -59,7 +60,7 @@ def test_head_on_collision_linear_convention_predicted():
     Schwager-Poeschel value for that damping ratio, not e."""
     z = damping_ratio_from_restitution(0.5, "linear")
     expected = restitution_from_damping_ratio(z, "no_attraction")
-    assert _collide(0.5, "linear", 0.01) == pytest.approx(expected, abs=1e-3)
+    assert _collide(0.5, "linear", 0.005) == pytest.approx(expected, abs=1e-3)
 
 
 def test_elastic_collision_restitution_one():
@@ -146,8 +147,11 @@ def test_resting_sphere_on_drum_floor_feels_its_weight(dim):
 
 
 def test_energy_conserved_without_damping_and_friction():
-    """Elastic contacts, no friction, resting drum: the total energy (kinetic + potential +
-    elastic) stays within 5e-4 of the energy scale, over 60 000 steps at dt = 0.1 t_crit."""
+    """Elastic contacts, no friction, resting drum, 25 particles bouncing for 0.3 s (about 550
+    neighbour rebuilds): the total energy (kinetic + gravitational + elastic) stays within
+    1.5e-3 of the energy scale (initial kinetic energy + M g R) at dt = 0.05 t_crit. The
+    error is that of velocity Verlet at the kinks of the one-sided contact spring, second
+    order in dt (measured 3.5e-3, 7.9e-4, 1.4e-4 at 0.1, 0.05, 0.025 t_crit)."""
     R, r, n_side = 0.03, 0.002, 5
     xs = np.linspace(-0.012, 0.012, n_side)
     pos = np.array([(x, y) for x in xs for y in xs])
@@ -155,17 +159,19 @@ def test_energy_conserved_without_damping_and_friction():
     vel = rng.normal(0, 0.2, pos.shape)
     part = make_particles(np.full(len(pos), r), 2700.0)
     p = contact_params(1e4, friction=0.0, wall_friction=0.0)
-    dem = make_dem(part, [DrumShell(R)], p, dim=2, safety_factor=0.1)
+    dem = make_dem(part, [DrumShell(R)], p, dim=2, safety_factor=0.05)
     s = dem.init(pos, vel)
     e0 = dem.energies(s)
     scale = e0["kinetic"] + float(np.sum(part.mass)) * G * R  # energy to lift the bed by R
     worst = 0.0
+    n = int(0.05 / dem.dt)
     for _ in range(6):
-        s = dem.run(s, 10000, chunk=10000)
+        s = dem.run(s, n, chunk=n)
         e = dem.energies(s)
         worst = max(worst, abs(e["total"] - e0["total"]) / scale)
-    assert int(s.n_rebuilds) > 0
-    assert worst < 5e-4
+    assert int(s.n_rebuilds) > 100
+    assert e["kinetic"] > 0.3 * e0["kinetic"]  # still a gas, not settled
+    assert worst < 1.5e-3
 
 
 def test_youngs_modulus_stiffness_matches_table_2_1():
@@ -205,6 +211,10 @@ def test_rolling_resistance_stops_rolling_oscillation():
         for _ in range(10):
             s = dem.run(s, int(0.05 / dem.dt), chunk=50000)
             xs.append(float(s.position[0, 0]))
-        out[mu_r] = np.max(np.abs(xs))
-    assert out[0.0] > 1e-3
-    assert out[0.05] < 1e-5
+        out[mu_r] = (np.max(np.abs(xs)), np.ptp(xs))
+    # without: still rolling back and forth with about the initial amplitude
+    assert out[0.0][1] > 2e-3
+    # with: at rest (static friction of rolling holds it on the gentle slope of the drum
+    # bottom, where tan(theta) = x/(R - r) < mu_r)
+    assert out[0.05][1] < 1e-7
+    assert out[0.05][0] < 0.05 * (R - r)

@@ -17,12 +17,12 @@ Integration (velocity Verlet, the "kick-drift-kick" form used by LIGGGHTS ``nve/
 1. ``v += dt/2 F/m``, ``w += dt/2 M/I`` (I = 2/5 m r^2, solid sphere; also in 2D, where the
    particles are spheres of a monolayer that move in x-y and spin about z, as in PFC2D);
 2. ``x += dt v``; the neighbour list is rebuilt if some particle moved more than skin/2;
-3. forces and torques at the new positions. The tangential spring is incremented with the
-   half-step velocities (their dt multiple is exactly the displacement of the step); the
-   dashpots use the predicted full-step velocities ``v + dt F_old/m`` (``w`` likewise).
-   (LIGGGHTS damps with the half-step velocity, which is first order in dt: the restitution
-   coefficient of a damped collision is then off by ~15 % at dt = 0.2 t_crit; the predictor
-   makes that error second order.)
+3. forces and torques at the new positions with the half-step velocities (the dashpots and
+   the tangential spring increment use them, as LIGGGHTS does). The dashpot then lags by
+   dt/2, a first-order error: the restitution coefficient of a damped collision (e = 0.5)
+   comes out 0.42 at dt = 0.2 t_crit, 0.488 at 0.05 and 0.4988 at 0.01 t_crit. (A predicted
+   full-step velocity ``v + dt F/m`` for the dashpots was tried and rejected: it made dense
+   damped beds unstable at dt = 0.2 t_crit.)
 4. ``v += dt/2 F/m``, ``w += dt/2 M/I``.
 
 Time step: ``t_crit = 2 sqrt(m_min / k_max)`` (Weigler digest [2.1], k_max the largest normal
@@ -208,17 +208,21 @@ class DEM:
     _step: Callable
     _run_steps: Callable
     _diag: Callable
+    _energies: Callable
     default_chunk: int = 1000
+    cell_capacity: int = 0
 
     # -- construction of states --------------------------------------------------------------
 
     def init(self, position, velocity=None, angular_velocity=None, time=0.0, extra=None,
-             pair_capacity: int = 0) -> DEMState:
+             pair_capacity: Optional[int] = None) -> DEMState:
         """Initial state: allocates the neighbour list and evaluates the forces at rest springs.
 
         position (N, dim) m; velocity (N, dim) m/s (default 0); angular_velocity (N,) in 2D or
         (N, 3) rad/s (default 0); time (s); extra: user state for ``extra_update``;
-        pair_capacity: minimum neighbour-pair capacity (default: 1.5 x the current pairs).
+        pair_capacity: minimum neighbour-pair capacity; default ``4 N`` (2D) / ``8 N`` (3D),
+        enough for a dense bed, or 1.5 x the current pairs if more. Overflows are handled by
+        :meth:`run` in any case (reallocation and redo).
         """
         dt_ = self.dtype
         n = self.particles.n
@@ -230,7 +234,11 @@ class DEM:
         wshape = (n,) if self.dim == 2 else (n, 3)
         w = (jnp.zeros(wshape, dt_) if angular_velocity is None
              else jnp.asarray(angular_velocity, dt_).reshape(wshape))
-        nbrs = self.neighbor.allocate(pos, pair_capacity)
+        # floor: a dense bed has ~3 (2D) / ~6.6 (3D, peers/liggghts/README.md) pairs per
+        # particle within 2r + skin; a dilute start (poured grid) must not size the buffer
+        if pair_capacity is None:
+            pair_capacity = (4 if self.dim == 2 else 8) * n
+        nbrs = self.neighbor.allocate(pos, int(pair_capacity), self.cell_capacity)
         cap = nbrs.idx.shape[1]
         n_w = len(self.walls)
         state = DEMState(
@@ -267,14 +275,12 @@ class DEM:
     def reallocate(self, state: DEMState, pair_capacity: int = 0, extra_cell_capacity: int = 0):
         """A new neighbour list at the state's positions (larger buffers); springs carried over."""
         nb = self.neighbor
-        pos_box = nb.to_box(state.position)
-        new = nb.neighbor_fns.allocate(pos_box, extra_capacity=int(extra_cell_capacity))
+        old_cc = state.nbrs.cell_list_capacity or 0
+        new = nb.allocate(state.position, int(pair_capacity),
+                          max(self.cell_capacity, old_cc + int(extra_cell_capacity)))
         n = self.particles.n
         count = int(jnp.sum(new.idx[0] < n))
-        target = max(int(pair_capacity), int(count * nb.capacity_multiplier) + 1, 1)
-        if new.max_occupancy != target:
-            new = dataclasses.replace(new, max_occupancy=target)
-            new = nb.neighbor_fns.update(pos_box, new)
+        target = new.idx.shape[1]
         if bool(new.did_buffer_overflow):
             raise NeighborListError(
                 f"neighbour list still overflows after reallocation (pairs {count}, capacity "
@@ -355,34 +361,9 @@ class DEM:
 
     def energies(self, state: DEMState) -> dict:
         """Energy book (J): kinetic (translation, rotation), gravitational potential
-        ``-sum m g.x``, elastic (normal ``k_n delta^2/2`` and tangential ``k_t |xi|^2/2``)."""
-        p = self.particles
-        m = p.mass.astype(self.dtype)
-        ek = 0.5 * jnp.sum(m[:, None] * state.velocity**2)
-        w2 = state.angular_velocity**2
-        if w2.ndim == 2:
-            w2 = jnp.sum(w2, axis=-1)
-        er = 0.5 * jnp.sum(p.inertia.astype(self.dtype) * w2)
-        g = jnp.asarray(self.gravity, self.dtype)
-        ep = -jnp.sum(m * (state.position @ g))
-        c = self.contacts(state)
-        t = p.ptype
-        i = jnp.where(c.pair_mask, c.pair_i, 0)
-        j = jnp.where(c.pair_mask, c.pair_j, 0)
-        kn = self.params.kn_pp[t[i], t[j]]
-        kt = self.params.kt_pp[t[i], t[j]]
-        en_pp = 0.5 * jnp.sum(jnp.where(c.pair_mask, kn * c.pair_overlap**2, 0.0))
-        et_pp = 0.5 * jnp.sum(jnp.where(c.pair_mask, kt * jnp.sum(state.pair_spring**2, -1), 0.0))
-        W = len(self.walls)
-        T = self.params.n_types
-        knw = jnp.broadcast_to(self.params.kn_pw, (T, W))[t].reshape(-1)
-        ktw = jnp.broadcast_to(self.params.kt_pw, (T, W))[t].reshape(-1)
-        en_w = 0.5 * jnp.sum(jnp.where(c.wall_mask, knw * c.wall_overlap**2, 0.0))
-        et_w = 0.5 * jnp.sum(jnp.where(c.wall_mask,
-                                       ktw * jnp.sum(state.wall_spring**2, -1).reshape(-1), 0.0))
-        out = dict(kinetic=ek, rotational=er, potential=ep, elastic=en_pp + et_pp + en_w + et_w)
-        out["total"] = ek + er + ep + out["elastic"]
-        return {k: float(v) for k, v in out.items()}
+        ``-sum m g.x``, elastic (normal ``k_n delta^2/2`` and tangential ``k_t |xi|^2/2``)
+        and their total."""
+        return {k: float(v) for k, v in self._energies(state).items()}
 
 
 def make_dem(
@@ -487,6 +468,14 @@ def make_dem(
     nb_hi = hi + margin
     neighbor = make_neighbor_setup(dim, nb_lo, nb_hi, cutoff, skin, periodic_length,
                                    capacity_multiplier)
+    # cell-list capacity floor: twice the particles of the smallest size that a cell of side
+    # `cutoff` holds at the densest packing (hexagonal 0.907 in 2D, fcc 0.74 in 3D), plus one;
+    # jax-md's own estimate from a dilute start (a poured grid) would overflow at once
+    if dim == 2:
+        per_cell = 0.907 * cutoff**2 / (math.pi * r_min**2)
+    else:
+        per_cell = 0.74 * cutoff**3 / (4.0 / 3.0 * math.pi * r_min**3)
+    cell_cap = int(math.ceil(2.0 * per_cell)) + 1
     # escape region: the domain plus one radius of tolerance
     dom_lo = lo - r_max
     dom_hi = hi + r_max
@@ -658,14 +647,8 @@ def make_dem(
         else:
             need = neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
             nbrs, spring, count = jax.lax.cond(need, rebuild, keep, args)
-        # predicted full-step velocities for the dashpots
-        v_p = v + half * state.force * inv_m[:, None]
-        if rotation:
-            w_p = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
-        else:
-            w_p = w
-        f, tq, spring, wspring, contacts, ovl = forces(x, v_p, w_p, t, nbrs, spring,
-                                                       state.wall_spring, v, w)
+        f, tq, spring, wspring, contacts, ovl = forces(x, v, w, t, nbrs, spring,
+                                                       state.wall_spring)
         v = v + half * f * inv_m[:, None]
         if rotation:
             w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
@@ -677,6 +660,31 @@ def make_dem(
             new = new._replace(extra=extra_update(state.extra, new, contacts, dt))
         return new, contacts
 
+    def energies(state):
+        m = mass
+        ek = 0.5 * jnp.sum(m[:, None] * state.velocity**2)
+        w2 = state.angular_velocity**2
+        if w2.ndim == 2:
+            w2 = jnp.sum(w2, axis=-1)
+        er = 0.5 * jnp.sum(inertia * w2)
+        ep = -jnp.sum(m * (state.position @ g_vec))
+        c = forces(state.position, state.velocity, state.angular_velocity, state.time,
+                   state.nbrs, state.pair_spring, state.wall_spring)[4]
+        i = jnp.where(c.pair_mask, c.pair_i, 0)
+        j = jnp.where(c.pair_mask, c.pair_j, 0)
+        kn = table(params.kn_pp, ptype[i], ptype[j])
+        kt = table(params.kt_pp, ptype[i], ptype[j])
+        el = 0.5 * jnp.sum(jnp.where(c.pair_mask, kn * c.pair_overlap**2
+                                     + kt * jnp.sum(state.pair_spring**2, -1), 0.0))
+        if n_w > 0:
+            knw = jnp.broadcast_to(wall_table(params.kn_pw), (n, n_w)).reshape(-1)
+            ktw = jnp.broadcast_to(wall_table(params.kt_pw), (n, n_w)).reshape(-1)
+            xi2 = jnp.sum(state.wall_spring**2, -1).reshape(-1)
+            el = el + 0.5 * jnp.sum(jnp.where(c.wall_mask, knw * c.wall_overlap**2 + ktw * xi2,
+                                              0.0))
+        return dict(kinetic=ek, rotational=er, potential=ep, elastic=el,
+                    total=ek + er + ep + el)
+
     def run_steps(state, n_steps):
         # a fori_loop with a traced trip count: one compilation serves every chunk length
         return jax.lax.fori_loop(0, n_steps, lambda k, st: step(st)[0], state)
@@ -687,5 +695,6 @@ def make_dem(
         particles=particles, params=params, neighbor=neighbor, dtype=dtype, gravity=gravity,
         max_overlap=float(max_overlap), domain_lo=dom_lo, domain_hi=dom_hi,
         _forces=jax.jit(forces), _step=jax.jit(step),
-        _run_steps=jax.jit(run_steps), _diag=diag, default_chunk=int(chunk),
+        _run_steps=jax.jit(run_steps), _diag=diag, _energies=jax.jit(energies), default_chunk=int(chunk),
+        cell_capacity=cell_cap,
     )

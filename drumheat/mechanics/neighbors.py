@@ -121,18 +121,25 @@ class NeighborSetup:
         """Positions in jax-md's box frame (shifted by ``-lo``)."""
         return position - jnp.asarray(self.lo, dtype=position.dtype)
 
-    def allocate(self, position, min_capacity: int = 0):
+    def allocate(self, position, min_capacity: int = 0, min_cell_capacity: int = 0):
         """Allocate a neighbour list at ``position`` (not jittable: it sizes the buffers).
 
         The pair capacity is ``capacity_multiplier`` times the current number of pairs, and at
-        least ``min_capacity`` (and at least 1).
+        least ``min_capacity`` (and at least 1); the cell-list capacity is jax-md's estimate
+        (``capacity_multiplier`` x the fullest cell) and at least ``min_cell_capacity``.
         """
+        import dataclasses
+
         pos = self.to_box(position)
         nbrs = self.neighbor_fns.allocate(pos)
-        min_capacity = max(int(min_capacity), 1)  # never a zero-size pair buffer
-        if nbrs.max_occupancy < min_capacity:
-            import dataclasses
-            nbrs = dataclasses.replace(nbrs, max_occupancy=int(min_capacity))
+        n = position.shape[0]
+        cc = nbrs.cell_list_capacity
+        if cc is not None and cc < min_cell_capacity:
+            nbrs = self.neighbor_fns.allocate(pos, extra_capacity=int(min_cell_capacity - cc))
+        count = int(jnp.sum(nbrs.idx[0] < n))
+        target = max(int(min_capacity), int(count * self.capacity_multiplier) + 1, 1)
+        if nbrs.max_occupancy != target:
+            nbrs = dataclasses.replace(nbrs, max_occupancy=target)
             nbrs = self.neighbor_fns.update(pos, nbrs)
         return nbrs
 

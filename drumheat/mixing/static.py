@@ -30,7 +30,8 @@ def _concrete(x):
 
 
 def integrate_network(scene: Scene, model: ThermalModel, net: ContactNetwork, y0, t_out,
-                      progress: SimProgress | None = None, t_offset: float = 0.0):
+                      progress: SimProgress | None = None, t_offset: float = 0.0,
+                      autodiff: str = "reverse"):
     """Integrate the thermal state over the output times on a fixed contact network.
 
     Parameters
@@ -44,6 +45,8 @@ def integrate_network(scene: Scene, model: ThermalModel, net: ContactNetwork, y0
         Output times, s; ``t_out[0]`` is the start.
     progress : SimProgress, optional
         Updated with the absolute time ``t_offset + t`` after every output interval.
+    autodiff : {"reverse", "forward"}
+        Autodiff mode the adaptive solves support (:func:`advance_adaptive`).
 
     Returns
     -------
@@ -71,7 +74,8 @@ def integrate_network(scene: Scene, model: ThermalModel, net: ContactNetwork, y0
             y = advance_explicit(model, net, y, float(t0), float(t1), dt)
         else:
             y = advance_adaptive(model, net, y, jnp.asarray(t0, float), jnp.asarray(t1, float),
-                                 run.rtol, run.atol, implicit=run.solver == "implicit")
+                                 run.rtol, run.atol, implicit=run.solver == "implicit",
+                                 autodiff=autodiff)
         states.append(y)
         if progress is not None:
             progress.update_to(t_offset + t1)
@@ -94,10 +98,18 @@ class StaticBed:
 
     Attributes
     ----------
+    autodiff : {"reverse", "forward"}
+        How :meth:`solve` may be differentiated: ``"reverse"`` (default, ``jax.grad``) or
+        ``"forward"`` (``jax.jacfwd``; set by :mod:`drumheat.calibrate`).
+    t_out : ndarray
+        Output times of :meth:`solve`, s (from the scene; may be replaced by any increasing
+        grid starting at 0).
     packing : drumheat.mechanics.deposition.Packing
     net : ContactNetwork
         Particle-particle contacts and contacts with the drum shell (wall id 0).
     """
+
+    autodiff = "reverse"
 
     def __init__(self, scene: Scene):
         self.scene = scene
@@ -122,7 +134,7 @@ class StaticBed:
         """
         model, T0 = self.model(params)
         states = integrate_network(self.scene, model, self.net, initial_state(model, T0),
-                                   self.t_out, progress)
+                                   self.t_out, progress, autodiff=self.autodiff)
         return stack_states(states, model.accounts)
 
     def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:

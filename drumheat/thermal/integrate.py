@@ -42,13 +42,21 @@ def _vector_field(t, y, args):
 
 @eqx.filter_jit
 def advance_adaptive(model: ThermalModel, net: ContactNetwork, y, t0, t1, rtol, atol,
-                     implicit: bool = False, max_steps: int = 100_000):
-    """Advance the state from t0 to t1 with diffrax (Tsit5, or Kvaerno5 if ``implicit``)."""
+                     implicit: bool = False, max_steps: int = 100_000,
+                     autodiff: str = "reverse"):
+    """Advance the state from t0 to t1 with diffrax (Tsit5, or Kvaerno5 if ``implicit``).
+
+    ``autodiff`` picks how the solve may be differentiated: ``"reverse"`` (``jax.grad``,
+    diffrax ``RecursiveCheckpointAdjoint``) or ``"forward"`` (``jax.jvp``/``jax.jacfwd``,
+    diffrax ``ForwardMode``; cheaper to compile and efficient for a few parameters). Each
+    supports only its own mode; the values are identical.
+    """
     solver = diffrax.Kvaerno5() if implicit else diffrax.Tsit5()
+    adjoint = diffrax.ForwardMode() if autodiff == "forward" else diffrax.RecursiveCheckpointAdjoint()
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_vector_field), solver, t0, t1, dt0=None, y0=y, args=(model, net),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        saveat=diffrax.SaveAt(t1=True), max_steps=max_steps)
+        saveat=diffrax.SaveAt(t1=True), max_steps=max_steps, adjoint=adjoint)
     return jax.tree_util.tree_map(lambda a: a[-1], sol.ys)
 
 

@@ -321,6 +321,7 @@ def _wall_T(boundary, N):
 # ----------------------------------------------------------------------------------------------
 
 
+@eqx.filter_jit
 def stored_enthalpy(T, grid, material):
     """Stored enthalpy of each sphere, ``sum_i rho V_i h(T_i)`` in J (relative to T_ref).
 
@@ -330,7 +331,8 @@ def stored_enthalpy(T, grid, material):
     return jnp.sum(rho * grid.volume * material.enthalpy(T), axis=-1)
 
 
-def mean_temperature(T, grid, material, iters=20):
+@eqx.filter_jit
+def mean_temperature(T, grid, material, iters=12):
     """Enthalpy-mean temperature ``T_bar = h^-1(sum h_i V_i / sum V_i)`` per sphere, K.
 
     staltner-slag-particle.md [7.1]-[7.3] (rho constant within a sphere). Inverted with Newton
@@ -537,6 +539,17 @@ def explicit_integrate(
         lim = explicit_stability_limit(T0, grid, material, boundary, ghost_conductivity, per_node=True)
         if _is_concrete(lim, dt) and float(dt) > float(jnp.min(lim)):
             raise ValueError(_refusal_message(dt, lim, grid))
+    elif on_unstable != "substep":
+        raise ValueError(f"on_unstable must be 'raise' or 'substep', got {on_unstable!r}")
+    return _explicit_integrate_jit(
+        T0, jnp.asarray(dt, dtype=jnp.float64), int(n_steps), grid, material, boundary,
+        on_unstable, safety, ghost_conductivity,
+    )
+
+
+@eqx.filter_jit
+def _explicit_integrate_jit(T0, dt, n_steps, grid, material, boundary, on_unstable, safety, ghost_conductivity):
+    if on_unstable == "raise":
 
         def body(carry, _):
             T, Q = carry
@@ -559,10 +572,8 @@ def explicit_integrate(
             T, Q = jax.lax.fori_loop(0, n_sub.astype(jnp.int32), sub, (T, Q))
             return (T, Q), None
 
-    else:
-        raise ValueError(f"on_unstable must be 'raise' or 'substep', got {on_unstable!r}")
     Q0 = jnp.zeros(T0.shape[0])
-    (T, Q), _ = jax.lax.scan(body, (T0, Q0), None, length=int(n_steps))
+    (T, Q), _ = jax.lax.scan(body, (T0, Q0), None, length=n_steps)
     return T, Q
 
 
@@ -665,19 +676,24 @@ def implicit_step(T, dt, grid, material, boundary, theta=1.0, newton_iters=2):
 def implicit_integrate(T0, dt, n_steps, grid, material, boundary, theta=1.0, newton_iters=2):
     """Advance ``n_steps`` :func:`implicit_step` steps of size ``dt`` in one ``lax.scan``.
 
-    Differentiable end to end (``jax.grad`` through the scan and the tridiagonal solves).
+    Compiled once per shape/structure (``equinox.filter_jit``). Differentiable end to end (``jax.grad`` through the scan and the tridiagonal solves).
 
     Returns
     -------
     T : (N, n) final temperatures, K. Q_out : (N,) total heat out through the surface, J.
     """
-    boundary = _as_boundary(boundary)
-    T0 = jnp.asarray(T0, dtype=jnp.float64)
+    return _implicit_integrate_jit(
+        jnp.asarray(T0, dtype=jnp.float64), jnp.asarray(dt, dtype=jnp.float64), int(n_steps),
+        grid, material, _as_boundary(boundary), float(theta), int(newton_iters),
+    )
 
+
+@eqx.filter_jit
+def _implicit_integrate_jit(T0, dt, n_steps, grid, material, boundary, theta, newton_iters):
     def body(carry, _):
         T, Q = carry
         T, dQ = implicit_step(T, dt, grid, material, boundary, theta, newton_iters)
         return (T, Q + dQ), None
 
-    (T, Q), _ = jax.lax.scan(body, (T0, jnp.zeros(T0.shape[0])), None, length=int(n_steps))
+    (T, Q), _ = jax.lax.scan(body, (T0, jnp.zeros(T0.shape[0])), None, length=n_steps)
     return T, Q
