@@ -43,13 +43,16 @@ def _ffmpeg_path() -> str:
 
 
 def _format(out, fmt) -> str:
+    suffix = Path(out).suffix.lower().lstrip(".") if out is not None else ""
     if fmt is None:
-        suffix = Path(out).suffix.lower().lstrip(".") if out is not None else ""
         fmt = suffix if suffix else "gif"
     fmt = str(fmt).lower().lstrip(".")
     if fmt not in FORMATS:
         raise AnimationError(f"animation format {fmt!r} is not supported; allowed: "
                              + ", ".join(repr(f) for f in FORMATS))
+    if suffix and suffix != fmt:
+        raise AnimationError(f"output file '{out}' does not end in .{fmt}; name it *.{fmt} or "
+                             f"ask for format {suffix!r}")
     return fmt
 
 

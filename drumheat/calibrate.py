@@ -235,7 +235,10 @@ def check_parameter(scene: Scene, key: str) -> float:
     """
     try:
         tp, meta = _field_meta(scene, key)
-        value = scene.get(key)
+        try:
+            value = scene.get(key)
+        except AttributeError:  # a declared key inside an absent table, e.g. [heat.contact]
+            value = None
     except (KeyError, AttributeError, IndexError, ValueError):
         raise CalibrationDataError(
             f"parameter {key!r} is not a key of scene {scene.name!r}; fittable parameters are "
@@ -403,8 +406,8 @@ def _prepare(experiments, data, keys):
         experiments = [Experiment(experiments, data)]
     elif isinstance(experiments, Experiment):
         experiments = [experiments]
-    prepared, motions, names = [], {}, {}
-    for i, ex in enumerate(experiments):
+    checked, names = [], {}
+    for ex in experiments:
         scene = ex.scene if isinstance(ex.scene, Scene) else load_scene(ex.scene)
         if ex.overrides:
             scene = scene.with_overrides(ex.overrides)
@@ -417,6 +420,13 @@ def _prepare(experiments, data, keys):
         for k in keys:
             check_parameter(scene, k)
         df = read_measurements(ex.data, scene, label=f"experiment {name!r}")
+        checked.append((name, scene, df))
+    n_data = sum(len(df) * (df.shape[1] - 1) for _, _, df in checked)
+    if n_data < len(keys):
+        raise CalibrationDataError(f"{n_data} data point(s) for {len(keys)} parameter(s): a fit "
+                                   "needs at least as many points as parameters")
+    prepared, motions = [], {}
+    for name, scene, df in checked:  # packings and contacts are built once per scene
         key = scene.to_toml()
         if key not in motions:
             motions[key] = make_motion(scene)
@@ -468,11 +478,12 @@ def fit(experiments, data=None, params: Sequence[str] | dict | None = None, *,
         (``> 0`` or ``>= 0``, e.g. coefficients, temperatures) and whose start is > 0.
     optimizer : {"lbfgs", "adam"}
         ``"lbfgs"``: optax L-BFGS directions with a host-side Armijo backtracking line search
-        (default); ``"adam"``: ``optax.adam(learning_rate)`` on the (log-)scaled parameters.
+        (default); ``"adam"``: ``optax.adam`` on the (log-)scaled parameters with a cosine
+        decay of ``learning_rate`` over ``max_iter`` (a constant step keeps oscillating).
     max_iter : int
         Maximum number of iterations.
     learning_rate : float
-        Adam step on the scaled parameters (0.05 = 5 % for log parameters).
+        Initial Adam step on the scaled parameters (0.05 = 5 % for log parameters).
     xtol, ftol : float
         Stop when the largest step on the scaled parameters is below ``xtol`` or the loss
         decreases by less than ``ftol`` times itself.
@@ -500,9 +511,6 @@ def fit(experiments, data=None, params: Sequence[str] | dict | None = None, *,
         raise CalibrationDataError(f"parameter keys repeated: {keys}")
     prepared = _prepare(experiments, data, keys)
     n_data = sum(len(p.data) * len(p.columns) for p in prepared)
-    if n_data < len(keys):
-        raise CalibrationDataError(f"{n_data} data point(s) for {len(keys)} parameter(s): a fit "
-                                   "needs at least as many points as parameters")
     y = np.concatenate([p.data[c].to_numpy() for p in prepared for c in p.columns])
     first = prepared[0].scene
     x0 = {k: float(params[k]) if isinstance(params, dict) else check_parameter(first, k)
@@ -563,7 +571,8 @@ def fit(experiments, data=None, params: Sequence[str] | dict | None = None, *,
     f = loss_of(r)
     hist = [dict(iteration=0, loss=f, step=0.0, **{k: x0[k] for k in keys})]
     converged, message = False, f"stopped after max_iter = {max_iter} iterations"
-    opt = optax.lbfgs(linesearch=None) if optimizer == "lbfgs" else optax.adam(learning_rate)
+    opt = optax.lbfgs(linesearch=None) if optimizer == "lbfgs" else optax.adam(
+        optax.cosine_decay_schedule(learning_rate, max_iter, alpha=1e-3))
     if optimizer not in ("lbfgs", "adam"):
         raise ValueError(f"optimizer must be 'lbfgs' or 'adam', got {optimizer!r}")
     state = opt.init(u)

@@ -95,7 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _fail(message: str) -> int:
-    print(textwrap.fill(f"drumheat: error: {message}", width=100), file=sys.stderr)
+    print(textwrap.fill(f"drumheat: error: {message}", width=100, break_on_hyphens=False,
+                        break_long_words=False), file=sys.stderr)
     return 2
 
 

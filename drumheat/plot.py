@@ -160,9 +160,15 @@ def read_particles(result_dir) -> ParticleFrames:
     t = np.atleast_1d(np.asarray(arrays["t"], float))
     scene = None
     if (folder / "scene.toml").is_file():
-        from drumheat.scene import load_scene
+        import warnings
 
-        scene = load_scene(folder / "scene.toml")
+        from drumheat.scene import SceneError, load_scene
+
+        try:
+            scene = load_scene(folder / "scene.toml")
+        except SceneError as err:  # e.g. written by another drumheat version
+            warnings.warn(f"{folder / 'scene.toml'} is not a valid scene for this drumheat "
+                          f"version ({err}); drawing without the drum walls", stacklevel=2)
     n = np.asarray(arrays["T"]).shape[-1]
     group = np.asarray(arrays.get("group", np.zeros(n, int)), int)
     if "group_names" in arrays:
@@ -775,7 +781,8 @@ def plot_contact_network(result, index=-1, pairs=None, color_by="heat_flow", ax=
         values = np.abs(fr.T[index][i] - fr.T[index][j])
         label = "|temperature difference| / K"
     segs = np.stack([pos[i, :2], pos[j, :2]], axis=1) if len(pairs) else np.zeros((0, 2, 2))
-    lines = LineCollection(segs, cmap=cmap, linewidths=2.0, capstyle="round")
+    lw = 2.0 if len(fr.diameter) <= 150 else 1.2
+    lines = LineCollection(segs, cmap=cmap, linewidths=lw, capstyle="round")
     lines.set_array(values)
     if len(values):
         lines.set_clim(0.0, max(float(values.max()), 1e-12))

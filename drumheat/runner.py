@@ -63,7 +63,10 @@ class Result:
         """Write the result files (see DESIGN.md) to ``out_dir`` (default results/<scene>)."""
         from drumheat.io import write_results
 
-        return write_results(self, out_dir, figures=figures)
+        folder = write_results(self, out_dir, figures=figures)
+        for name, writer in self.trajectory.files.items():  # the motion model's own files
+            writer(folder / name)
+        return folder
 
 
 def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
@@ -72,9 +75,13 @@ def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
     Returns ``(residual_J (n_out,), rel_error)`` where ``residual = sum_i m_i c_i (T_i(t) -
     T_i(0)) - sum_accounts Q(t)`` and ``rel_error = max |residual| / scale`` with
     ``scale = sum_i m_i c_i |T_i(0) - T_mean(0)| + max |Q_account|`` (the heat that moved inside
-    the bed plus the heat exchanged with the outside).
+    the bed plus the heat exchanged with the outside). Where the trajectory carries
+    ``stored_heat`` (particles with radial shells) the stored-heat change is taken from it.
     """
-    stored = (traj.T - traj.T[0]) @ traj.capacity
+    if traj.stored_heat is not None:  # particles with shells: from the shell enthalpies
+        stored = np.asarray(traj.stored_heat, float)
+    else:
+        stored = (traj.T - traj.T[0]) @ traj.capacity
     received = sum(traj.Q.values()) if traj.Q else np.zeros_like(stored)
     residual = stored - received
     T0 = traj.T[0]
@@ -93,12 +100,15 @@ def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
     cols["T_min"], cols["T_max"] = traj.T.min(axis=1), traj.T.max(axis=1)
     if "wall" in traj.Q:
         cols["Q_wall"] = traj.Q["wall"]
+    if "wall" in traj.Q and scene.drum is not None and scene.drum.wall_temperature is not None:
         T_cap = traj.T @ traj.capacity / traj.capacity.sum()
         cols["alpha_overall"] = np.asarray(observe.alpha_overall(
             traj.t, T_cap, scene.drum.wall_temperature, T_cap[0], traj.capacity.sum(),
             traj.wall_area))
     if "gas" in traj.Q:
         cols["Q_loss"] = -traj.Q["gas"]
+    for account in sorted(set(traj.Q) - {"wall", "gas"}):
+        cols[f"Q_{account}"] = traj.Q[account]  # heat received from it since t = 0, J
     for name, values in traj.extra.items():
         cols[name] = values
     return pd.DataFrame(cols)
@@ -138,7 +148,7 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     summary = {
         "scene": scene.name,
         "n_particles": int(scene.n_particles),
-        "duration_s": float(scene.run.duration),
+        "duration_s": float(traj.t[-1] - traj.t[0]),
         "wall_time_s": round(wall_time, 3),
         "energy_balance_rel_error": rel,
         "effects": list(scene.heat.effects()),

@@ -62,12 +62,19 @@ _MISSING_VALUE = object()
 
 def spec(default: Any = _REQUIRED, *, unit: str = "", doc: str = "", gt: float | None = None,
          ge: float | None = None, lt: float | None = None, le: float | None = None,
-         choices: tuple | None = None, default_factory: Any = _REQUIRED):
-    """Declare a scene key: a dataclass field with unit, documentation and constraints."""
-    meta = dict(unit=unit, doc=doc, gt=gt, ge=ge, lt=lt, le=le, choices=choices)
+         choices: tuple | None = None, default_factory: Any = _REQUIRED,
+         required_when: Any = None, kw_only: bool = False):
+    """Declare a scene key: a dataclass field with unit, documentation and constraints.
+
+    ``required_when(table) -> bool`` makes an optional key required depending on the raw table
+    it sits in (e.g. ``[drum]`` for the motion models that need a drum); ``kw_only`` lets such a
+    key keep its place in the declaration order (the order in which missing keys are reported).
+    """
+    meta = dict(unit=unit, doc=doc, gt=gt, ge=ge, lt=lt, le=le, choices=choices,
+                required_when=required_when)
     if default_factory is not _REQUIRED:
-        return field(default_factory=default_factory, metadata=meta)
-    return field(default=default, metadata=meta)
+        return field(default_factory=default_factory, metadata=meta, kw_only=kw_only)
+    return field(default=default, metadata=meta, kw_only=kw_only)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -136,6 +143,20 @@ class GasConfig:
     material: str = spec("air", choices=tuple(sorted(GASES)), doc="Gas from the library.")
     conductivity: Optional[float] = spec(None, unit="W/(m K)", gt=0,
                                          doc="Overrides the library's conductivity.")
+    heat_capacity: Optional[float] = spec(None, unit="J/(kg K)", gt=0,
+                                          doc="Overrides the library's c_p (convection with "
+                                              "properties = 'gas', plug-flow gas balance).")
+    density: Optional[float] = spec(None, unit="kg/m3", gt=0,
+                                    doc="Gas density for convection with properties = 'gas' "
+                                        "(default: ideal gas at temperature and pressure).")
+    kinematic_viscosity: Optional[float] = spec(
+        None, unit="m2/s", gt=0, doc="Kinematic viscosity for convection with properties = "
+                                     "'gas' (default: the Staltner Table 4.6 fit at the gas "
+                                     "temperature, drumheat.models.air).")
+    mass_flux: Optional[float] = spec(None, unit="kg/(m2 s)", gt=0,
+                                      doc="Gas mass flux through the bed cross-section "
+                                          "(motion model 'fluidized': plug flow through the bed, "
+                                          "fluidized-bed-exercise.md section 4).")
 
 
 @dataclass(frozen=True)
@@ -169,6 +190,134 @@ class LossConfig:
     alphaA: float = spec(unit="W/K", ge=0, doc="(alpha A)_WK per particle.")
 
 
+CONVECTION_CORRELATIONS = ("constant", "gnielinski", "gnielinski-staltner", "ranz-marshall",
+                           "fluidized-bed")
+
+
+@dataclass(frozen=True)
+class ConvectionConfig:
+    """``[heat.convection]``: particle-gas convection on the whole sphere surface pi d^2.
+
+    alpha from a correlation of drumheat.models.convection (staltner-slag-particle.md section
+    5, fluidized-bed-exercise.md sections 2-5, kraychev-tube-bundle.md section 4).
+    """
+
+    correlation: str = spec("gnielinski", choices=CONVECTION_CORRELATIONS,
+                            doc="'constant': alpha as given; 'gnielinski': single sphere, L = d, "
+                                "all-Pr laminar part (fluidized-bed-exercise.md section 3); "
+                                "'gnielinski-staltner': L = pi d/2, Nu_lam = 0.664 Re^1/2 "
+                                "Pr^1/3 (staltner [3.25]-[3.28]); 'ranz-marshall': Nu = 2 + "
+                                "0.6 Re^1/2 Pr^1/3 (kraychev (3-14)); 'fluidized-bed': mean of "
+                                "the loosening point (packed bed, factor f_a) and the discharge "
+                                "point (single sphere), fluidized-bed-exercise.md section 5.")
+    alpha: Optional[float] = spec(None, unit="W/(m2 K)", gt=0,
+                                  doc="alpha on the sphere surface pi d^2; required for "
+                                      "correlation 'constant'.")
+    velocity: Optional[float] = spec(None, unit="m/s", ge=0,
+                                     doc="Gas velocity relative to the particle (superficial "
+                                         "velocity when porosity is given; discharge velocity "
+                                         "u_A for 'fluidized-bed'). Motion model 'granulator' "
+                                         "uses the droplet speed v_S when left out.")
+    porosity: Optional[float] = spec(None, gt=0, le=1,
+                                     doc="Void fraction psi of a packed bed: Re on the "
+                                         "interstitial velocity u/psi and Nu times f_a = 1 + "
+                                         "1.5 (1 - psi) (fluidized-bed-exercise.md section 2).")
+    loosening_velocity: float = spec(1.2, unit="m/s", gt=0,
+                                     doc="'fluidized-bed': superficial velocity at the "
+                                         "loosening point (exercise: 1.2 m/s).")
+    loosening_porosity: float = spec(0.4, gt=0.26, lt=1,
+                                     doc="'fluidized-bed': porosity at the loosening point "
+                                         "(exercise: 0.4).")
+    properties: str = spec("polynomial", choices=("polynomial", "gas"),
+                           doc="Gas properties: 'polynomial' = dry-air fits of "
+                               "staltner-slag-particle.md section 9 (clamped to 273-1273 K with "
+                               "a warning); 'gas' = constants of the [gas] table.")
+    property_temperature: str = spec("gas", choices=("gas", "film"),
+                                     doc="Temperature of the gas properties: the gas "
+                                         "temperature, or the film temperature (T_s + T_g)/2 "
+                                         "evaluated at every step (staltner digest section 5 "
+                                         "leaves this open).")
+    internal_resistance: str = spec("none", choices=("none", "transient-sphere"),
+                                    doc="'transient-sphere': lumped particles get the overall "
+                                        "k = 1/(1/alpha_i + 1/alpha), alpha_i from the transient "
+                                        "internal Nusselt number at Fo(run.duration) "
+                                        "(fluidized-bed-exercise.md section 5); use without "
+                                        "[heat.internal].")
+
+
+@dataclass(frozen=True)
+class RadiationSurface:
+    """``[[heat.radiation.surfaces]]``: one grey surface of the enclosure."""
+
+    name: str = spec(doc="Surface name; for enclosure 'granulator' the four zones in order "
+                         "'bed', 'slots', 'wall', 'outlet' (staltner-slag-particle.md section 1).")
+    temperature: float = spec(unit="K", gt=0, doc="Surface temperature.")
+    emissivity: float = spec(gt=0, le=1, doc="Grey emissivity.")
+
+
+@dataclass(frozen=True)
+class RadiationConfig:
+    """``[heat.radiation]``: grey radiation between each particle and an enclosure.
+
+    q = eps_p sigma (T_s^4 - T_rad^4) on pi d^2 (staltner-slag-particle.md sections 4, 6).
+    """
+
+    enclosure: str = spec("sink", choices=("sink", "granulator"),
+                          doc="'sink': the particle sees one black surface at "
+                              "sink_temperature; 'granulator': the four-zone enclosure of "
+                              "[granulator] with the radiosity method and fictitious view "
+                              "factors (staltner [6.29]-[6.40]), T_rad from the particle's "
+                              "position (staltner digest section 4).")
+    sink_temperature: Optional[float] = spec(None, unit="K", gt=0,
+                                             doc="Temperature of the black sink; required for "
+                                                 "enclosure 'sink'.")
+    emissivity: Optional[float] = spec(None, gt=0, le=1,
+                                       doc="Particle emissivity; default the group's.")
+    surfaces: Optional[tuple[RadiationSurface, ...]] = spec(
+        None, doc="Enclosure surfaces (enclosure 'granulator').")
+
+
+@dataclass(frozen=True)
+class InternalConfig:
+    """``[heat.internal]``: radial shell conduction inside every particle.
+
+    Each particle carries n shells (drumheat.thermal.shells, staltner-slag-particle.md sections
+    2-4); the surface shell receives the surface flows of the other effects.
+    """
+
+    shells: int = spec(20, ge=2, le=2000, doc="Number of radial nodes n (node n on the surface).")
+    scheme: str = spec("implicit", choices=("implicit", "explicit"),
+                       doc="'implicit': backward-Euler finite volumes, unconditionally stable "
+                           "and monotone; 'explicit': the thesis' scheme [5.15]-[5.27] with its "
+                           "stability limit (staltner digest section 4) enforced.")
+    dt: Optional[float] = spec(None, unit="s", gt=0,
+                               doc="Shell time step; default: the explicit stability limit at "
+                                   "the start (0.9 of it for 'explicit').")
+    on_unstable: str = spec("refuse", choices=("refuse", "implicit"),
+                            doc="'explicit' with dt above the stability limit: refuse with a "
+                                "message, or switch to the implicit scheme with a warning.")
+    newton_iters: int = spec(3, ge=1, le=50, doc="Newton iterations per implicit step "
+                                                 "(temperature-dependent properties, radiation, "
+                                                 "coupling between particles).")
+    material: str = spec("constant", choices=("constant", "staltner-slag"),
+                         doc="'constant': the group's density, c and lambda; 'staltner-slag': "
+                             "c_p(T) and lambda(T) of staltner-slag-particle.md section 9 "
+                             "(piecewise linear between the knots), rho = 2690 kg/m3.")
+    liquid_conductivity: float = spec(0.20, unit="W/(m K)", gt=0,
+                                      doc="'staltner-slag': lambda of the liquid plateau.")
+    plateau_temperature: float = spec(1723.15, unit="K", gt=1673.15,
+                                      doc="'staltner-slag': start of the liquid lambda plateau "
+                                          "(not given in the source; 1450 degC chosen, linear "
+                                          "from 0.23 at 1400 degC).")
+    latent_heat: Optional[float] = spec(None, unit="J/kg", gt=0,
+                                        doc="Latent heat released around melting_temperature "
+                                            "(apparent heat capacity, shells.LatentHeatMaterial).")
+    melting_temperature: Optional[float] = spec(None, unit="K", gt=0,
+                                                doc="Centre of the melting range.")
+    melting_width: float = spec(5.0, unit="K", gt=0, doc="Standard deviation of the melting "
+                                                         "range.")
+
+
 @dataclass(frozen=True)
 class HeatConfig:
     """``[heat]``: the heat-transfer effects; an absent table is not simulated."""
@@ -176,6 +325,10 @@ class HeatConfig:
     contact: Optional[ContactConfig] = spec(None, doc="Particle-particle contact conduction.")
     wall: Optional[WallConfig] = spec(None, doc="Particle-wall contact conduction.")
     loss: Optional[LossConfig] = spec(None, doc="Heat loss to the gas.")
+    convection: Optional[ConvectionConfig] = spec(None, doc="Particle-gas convection.")
+    radiation: Optional[RadiationConfig] = spec(None, doc="Radiation to an enclosure.")
+    internal: Optional[InternalConfig] = spec(None, doc="Conduction inside the particles "
+                                                        "(radial shells).")
 
     def effects(self) -> tuple[str, ...]:
         """Names of the effects this scene switches on."""
@@ -186,7 +339,12 @@ class HeatConfig:
 MOTION_MODELS = {
     "static": "drumheat.mixing.static:StaticBed",
     "random": "drumheat.mixing.random:RandomBed",
+    "granulator": "drumheat.mixing.granulator:GranulatorParticle",
+    "fluidized": "drumheat.mixing.fluidized:FluidizedBed",
 }
+
+#: Motion models whose particles lie in the drum of the ``[drum]`` table.
+DRUM_MOTION_MODELS = ("static", "random")
 
 
 @dataclass(frozen=True)
@@ -205,6 +363,44 @@ class MotionConfig:
                       doc="Model 'random': 'permute' shuffles the temperatures over the fixed "
                           "positions (the thesis' choice), 'mean' sets every particle to the "
                           "bed mean.")
+    layers: int = spec(1, ge=1, doc="Model 'fluidized': number of layers the gas passes in "
+                                    "plug flow; particles are re-assigned to random layers every "
+                                    "t_R.")
+    loading: Optional[float] = spec(None, unit="kg/m2", gt=0,
+                                    doc="Model 'fluidized': particle mass per bed cross-section "
+                                        "m_1 (fluidized-bed-exercise.md section 4).")
+
+
+@dataclass(frozen=True)
+class GranulatorConfig:
+    """``[granulator]``: the dry slag granulator of staltner-slag-particle.md sections 1, 7, 10.
+
+    Zones: bed disc (radius r2, z = 0), slotted cylinder (r2, height h3), water-cooled cone
+    (height h4, inclined alpha4 to the horizontal), outlet disc (r5 = r2 - h4/tan alpha4).
+    """
+
+    r2: float = spec(unit="m", gt=0, doc="Radius of the bed and the slotted cylinder.")
+    h4: float = spec(unit="m", gt=0, doc="Height of the water-cooled cone.")
+    alpha4: float = spec(unit="deg", gt=0, lt=90, doc="Cone inclination to the horizontal.")
+    disc_diameter: float = spec(unit="m", gt=0, doc="Spinning-disc diameter d_Dt.")
+    disc_speed: float = spec(unit="1/min", gt=0, doc="Disc speed n_Dt; droplet speed v_S = "
+                                                     "0.8 pi d_Dt n_Dt [4.1].")
+    slag_rate: float = spec(unit="kg/min", gt=31.46,
+                            doc="Slag mass flow m_S; wall heat Q_W [MW] = 0.0036207 m_S - "
+                                "0.1139 [4.8] fixes the Phase-2 contact time [4.9].")
+    h3: float = spec(1.0, unit="m", gt=0, doc="Height of the slotted cylinder (Tab. 4.3).")
+    disc_height: Optional[float] = spec(None, unit="m", gt=0,
+                                        doc="Height of the disc (and the horizontal Phase-1 "
+                                            "path); default mid-cone h3 + h4/2 (digest note).")
+    wall_temperature: float = spec(373.15, unit="K", gt=0, doc="T_4 of the water-cooled wall.")
+    wall_density: float = spec(7800.0, unit="kg/m3", gt=0, doc="Steel wall, Tab. 4.7.")
+    wall_heat_capacity: float = spec(500.0, unit="J/(kg K)", gt=0, doc="Steel wall, Tab. 4.7.")
+    wall_conductivity: float = spec(50.0, unit="W/(m K)", gt=0, doc="Steel wall, Tab. 4.7.")
+    contact_mode: str = spec("surface", choices=("surface",),
+                             doc="Phase-2 Dirichlet boundary: node n held at the contact "
+                                 "temperature T_m (the digest's consistent reading).")
+    segments: int = spec(20, ge=1, doc="Path segments per flight phase; the radiation sink "
+                                       "temperature is taken at each segment's midpoint.")
 
 
 @dataclass(frozen=True)
@@ -231,7 +427,10 @@ class Scene:
 
     name: str = spec(doc="Scene name; default result folder results/<name>.")
     run: RunConfig = spec(doc="Duration, output and integrator.")
-    drum: DrumConfig = spec(doc="The drum.")
+    drum: Optional[DrumConfig] = spec(
+        None, kw_only=True, doc="The drum; required for the motion models static and random.",
+        required_when=lambda t: (t.get("motion") or {}).get("model", "static")
+        in DRUM_MOTION_MODELS if isinstance(t.get("motion") or {}, dict) else True)
     groups: tuple[GroupConfig, ...] = spec(doc="Particle groups, at least one.")
     description: str = spec("", doc="One line shown by `drumheat scenes`.")
     dim: int = spec(2, choices=(2, 3), doc="2: a monolayer of spheres in a drum slice; 3: a 3D "
@@ -240,6 +439,8 @@ class Scene:
     heat: HeatConfig = spec(default_factory=HeatConfig, doc="Heat-transfer effects.")
     motion: MotionConfig = spec(default_factory=MotionConfig, doc="Motion model.")
     packing: PackingConfig = spec(default_factory=PackingConfig, doc="Initial packing.")
+    granulator: Optional[GranulatorConfig] = spec(None, doc="Granulator geometry and process "
+                                                            "(motion model 'granulator').")
     source_path: Optional[str] = field(default=None, compare=False,
                                        metadata=dict(internal=True))
 
@@ -361,7 +562,8 @@ def _build(cls, table: dict, prefix: str, scene_name):
         key = f"{prefix}.{name}" if prefix else name
         if name in table:
             kwargs[name] = _convert(table[name], hints[name], f.metadata, key, scene_name)
-        elif f.default is _REQUIRED and f.default_factory is _REQUIRED:
+        elif (f.default is _REQUIRED and f.default_factory is _REQUIRED) or (
+                f.metadata.get("required_when") is not None and f.metadata["required_when"](table)):
             tp, _ = _unwrap_optional(hints[name])
             raise SceneError(key, _MISSING_VALUE, _allowed_text(f.metadata, tp), scene_name)
     return cls(**kwargs)
@@ -430,20 +632,20 @@ def _check_consistency(s: Scene) -> None:
     for i, g in enumerate(s.groups):
         if names.index(g.name) != i:
             raise SceneError(f"groups.{i}.name", g.name, "group names must be unique", n)
-        if g.diameter >= s.drum.diameter:
+        if s.drum is not None and g.diameter >= s.drum.diameter:
             raise SceneError(f"groups.{i}.diameter", g.diameter,
                              f"must be smaller than drum.diameter = {s.drum.diameter:g} m", n)
-    if s.dim == 3 and s.drum.depth is None:
+    if s.drum is not None and s.dim == 3 and s.drum.depth is None:
         raise SceneError("drum.depth", _MISSING_VALUE, "a 3D scene (dim = 3) needs the axial "
                          "length of the drum slice, in m", n)
-    if s.dim == 2:
+    if s.drum is not None and s.dim == 2:
         solid = sum(g.count * math.pi * g.diameter**2 / 4 for g in s.groups)
         drum = math.pi * s.drum.diameter**2 / 4
         if solid > 0.8 * drum:
             raise SceneError("groups", f"{s.n_particles} particles",
                              f"the particles cover {solid / drum:.0%} of the drum cross-section; "
                              "a monolayer packing holds at most about 80 %", n)
-    if s.heat.wall is not None and s.drum.wall_temperature is None:
+    if s.heat.wall is not None and (s.drum is None or s.drum.wall_temperature is None):
         raise SceneError("drum.wall_temperature", _MISSING_VALUE,
                          "[heat.wall] needs the wall temperature, in K", n)
     for eff in ("contact", "wall"):
@@ -458,15 +660,94 @@ def _check_consistency(s: Scene) -> None:
     if s.heat.loss is not None and s.gas is None:
         raise SceneError("gas.temperature", _MISSING_VALUE,
                          "[heat.loss] needs the gas temperature, in K", n)
+    _check_new_effects(s)
     if s.motion.model == "random" and s.motion.t_R is None:
         raise SceneError("motion.t_R", _MISSING_VALUE, "model 'random' needs the re-mixing "
                          "period t_R, a number > 0 in s", n)
+    if s.motion.model == "fluidized":
+        if s.motion.loading is None:
+            raise SceneError("motion.loading", _MISSING_VALUE, "model 'fluidized' needs the "
+                             "particle mass per bed cross-section, in kg/m2", n)
+        if s.gas is None or s.gas.mass_flux is None:
+            raise SceneError("gas.mass_flux", _MISSING_VALUE, "model 'fluidized' needs the gas "
+                             "mass flux through the bed, in kg/(m2 s)", n)
+        if s.heat.convection is None:
+            raise SceneError("heat.convection", _MISSING_VALUE, "model 'fluidized' exchanges "
+                             "heat with the gas through [heat.convection]", n)
+        if s.motion.layers > 1 and s.motion.t_R is None:
+            raise SceneError("motion.t_R", _MISSING_VALUE, "model 'fluidized' with several "
+                             "layers needs the re-mixing period t_R, in s", n)
+    if s.motion.model == "granulator":
+        if s.granulator is None:
+            raise SceneError("granulator", _MISSING_VALUE, "motion model 'granulator' needs the "
+                             "[granulator] table (geometry, disc, slag rate)", n)
+        if s.heat.internal is None:
+            raise SceneError("heat.internal", _MISSING_VALUE, "motion model 'granulator' "
+                             "resolves the droplet's radial profile; add [heat.internal]", n)
+        if s.heat.contact is not None or s.heat.wall is not None:
+            raise SceneError("heat.contact" if s.heat.contact else "heat.wall", "a table",
+                             "a single droplet has no contacts; Phase-2 wall contact is part of "
+                             "motion model 'granulator'", n)
+        g = s.granulator
+        if g.h4 / math.tan(math.radians(g.alpha4)) >= g.r2:
+            raise SceneError("granulator.h4", g.h4, "the cone closes before its top "
+                             "(r5 = r2 - h4/tan(alpha4) <= 0); reduce h4 or raise alpha4", n)
     if s.packing.method == "file" and s.packing.file is None:
         raise SceneError("packing.file", _MISSING_VALUE, "method 'file' needs a path to an .npz "
                          "packing", n)
     if s.motion.model in ("static", "random") and s.dim == 3 and s.packing.method != "file":
         raise SceneError("dim", 3, "the static deposition packing is 2D; a 3D static bed needs "
                          "packing.method = 'file'", n)
+
+
+def _check_new_effects(s: Scene) -> None:
+    """Cross-field rules of [heat.convection], [heat.radiation] and [heat.internal]."""
+    n, h = s.name, s.heat
+    c = h.convection
+    if c is not None:
+        if s.gas is None:
+            raise SceneError("gas.temperature", _MISSING_VALUE,
+                             "[heat.convection] needs the gas temperature, in K", n)
+        if c.correlation == "constant" and c.alpha is None:
+            raise SceneError("heat.convection.alpha", _MISSING_VALUE,
+                             "correlation 'constant' needs alpha, a number > 0 in W/(m2 K)", n)
+        if c.correlation != "constant" and c.alpha is not None:
+            raise SceneError("heat.convection.alpha", c.alpha, f"correlation {c.correlation!r} "
+                             "computes alpha; leave alpha out or use correlation 'constant'", n)
+        if (c.correlation not in ("constant",) and c.velocity is None
+                and s.motion.model != "granulator"):
+            raise SceneError("heat.convection.velocity", _MISSING_VALUE,
+                             f"correlation {c.correlation!r} needs the gas velocity, in m/s", n)
+        if c.properties == "gas" and c.correlation != "constant":
+            for key in ("kinematic_viscosity", "conductivity", "heat_capacity"):
+                if getattr(s.gas, key) is None:
+                    raise SceneError(f"gas.{key}", _MISSING_VALUE, "convection with properties "
+                                     "= 'gas' needs the gas constants kinematic_viscosity, "
+                                     "conductivity and heat_capacity", n)
+        if c.internal_resistance != "none" and h.internal is not None:
+            raise SceneError("heat.convection.internal_resistance", c.internal_resistance,
+                             "with [heat.internal] the shells resolve the internal resistance; "
+                             "use 'none'", n)
+    r = h.radiation
+    if r is not None:
+        if r.enclosure == "sink" and r.sink_temperature is None:
+            raise SceneError("heat.radiation.sink_temperature", _MISSING_VALUE,
+                             "enclosure 'sink' needs the sink temperature, in K", n)
+        if r.enclosure == "granulator":
+            zones = ("bed", "slots", "wall", "outlet")
+            got = tuple(x.name for x in (r.surfaces or ()))
+            if got != zones:
+                raise SceneError("heat.radiation.surfaces", list(got), "enclosure 'granulator' "
+                                 "needs four surfaces named " + ", ".join(zones) + " in this "
+                                 "order", n)
+            if s.granulator is None:
+                raise SceneError("granulator", _MISSING_VALUE, "enclosure 'granulator' needs "
+                                 "the [granulator] geometry", n)
+    i = h.internal
+    if i is not None and (i.latent_heat is None) != (i.melting_temperature is None):
+        raise SceneError("heat.internal.melting_temperature" if i.melting_temperature is None
+                         else "heat.internal.latent_heat", _MISSING_VALUE,
+                         "latent heat needs both latent_heat (J/kg) and melting_temperature (K)", n)
 
 
 def scene_from_dict(raw: dict, source_path: str | None = None) -> Scene:

@@ -31,6 +31,11 @@ class Trajectory:
         Transfer area of eq. [1.10], ``sum of d_p^2 over wall contacts`` (thesis App. A7), m2.
     extra : dict
         Further columns a motion model provides.
+    stored_heat : ndarray (n_out,) or None
+        Change of the stored heat since t = 0, J, where it is not ``sum m c (T - T0)``
+        (particles with radial shells: from the shell enthalpies); used by the energy balance.
+    files : dict
+        Further result files: ``{file name: writer(path)}``, written by ``Result.save``.
     """
 
     t: np.ndarray
@@ -45,3 +50,5 @@ class Trajectory:
     n_wall_contacts: np.ndarray
     wall_area: np.ndarray
     extra: dict = field(default_factory=dict)
+    stored_heat: np.ndarray | None = None
+    files: dict = field(default_factory=dict)

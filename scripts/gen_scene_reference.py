@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import inspect
+import re
 import sys
 import typing
 
@@ -46,7 +47,16 @@ def _table_docs() -> dict[str, str]:
 
 
 def _cell(text) -> str:
-    return str(text).replace("|", "\\|").replace("\n", " ")
+    """Docstring text as one Markdown table cell (reST roles and literals to code spans)."""
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", r"`\1`", str(text))
+    text = text.replace("``", "`").replace("<", "&lt;").replace(">", "&gt;")
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def _table_text(text: str) -> str:
+    """A table's description without the leading ``[name]``: of its docstring."""
+    text = re.sub(r"^``\[{1,2}[^\]]+\]{1,2}``:\s*", "", text)
+    return _cell(text[:1].upper() + text[1:])
 
 
 def _default(value) -> str:
@@ -94,14 +104,14 @@ def render() -> str:
         '`drumheat.load_scene(name, overrides={"groups.0.temperature": 300.0})`; '
         "`groups.*` stands for every group (`groups.0`, `groups.1`, ...).",
         "",
-        "Tables: " + ", ".join(f"[{_heading(p).strip('`')}](#{_anchor(p)})" for p in tables)
+        "Tables: " + ", ".join(f"[{_heading(p)}](#{_anchor(p)})" for p in tables)
         + ".",
         "",
     ]
     for prefix, rows in tables.items():
         lines += [f"## {_heading(prefix)} {{ #{_anchor(prefix)} }}", ""]
         if docs.get(prefix):
-            lines += [_cell(docs[prefix]), ""]
+            lines += [_table_text(docs[prefix]), ""]
         lines += ["| key | type | unit | default | allowed | description |",
                   "|---|---|---|---|---|---|"]
         for key, type_name, unit, default, allowed, doc in rows:

@@ -46,6 +46,7 @@ def test_gif_every_and_explicit_out(tmp_path):
         assert im.n_frames == 3
 
 
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
 def test_mp4_or_clear_error(tmp_path):
     folder = write_result(tmp_path / "res", n_out=3)
     try:
@@ -66,6 +67,8 @@ def test_unknown_format(tmp_path):
     folder = write_result(tmp_path / "res", n_out=2)
     with pytest.raises(AnimationError, match="allowed"):
         animate(folder, out=tmp_path / "a.avi")
+    with pytest.raises(AnimationError, match="does not end in .mp4"):
+        animate(folder, out=tmp_path / "a.gif", fmt="mp4")
 
 
 def test_cli_animate(tmp_path, capsys):

@@ -19,21 +19,24 @@ from drumheat.mechanics import (
 G = 9.81
 
 
-def _collide(e, model, safety, k=1e4, r=0.005, v0=0.1):
+def _collide(e, model, safety, k=1e4, r=0.005, v0=0.1, phases=(0.0, 0.25, 0.5, 0.75)):
+    """Head-on collision of two equal spheres; returns e for each contact-onset phase (the
+    initial gap is ``phase * 2 v0 dt``, so contact starts at that fraction of a step)."""
     part = make_particles([r, r], 1000.0)
     p = contact_params(k, restitution=e, restitution_model=model, friction=0.0)
     dem = make_dem(part, [], p, dim=3, gravity=np.zeros(3),
                    bounds=([-0.05] * 3, [0.05] * 3), safety_factor=safety)
-    x = np.array([[-r - 1e-4, 0, 0], [r + 1e-4, 0, 0]])
-    v = np.array([[v0, 0, 0], [-v0, 0, 0]])
-    s = dem.init(x, v)
     t_contact = math.pi * math.sqrt(float(part.mass[0]) / 2 / k)
-    n = int((2e-4 / v0 + 3 * t_contact) / dem.dt)
-    s = dem.run_steps(s, n)
-    gap = float(s.position[1, 0] - s.position[0, 0]) - 2 * r
-    assert gap > 0, "particles must have separated"
-    vv = np.asarray(s.velocity)
-    return -(vv[1, 0] - vv[0, 0]) / (-2 * v0)
+    out = []
+    for ph in phases:
+        gap = ph * v0 * dem.dt
+        x = np.array([[-r - gap, 0, 0], [r + gap, 0, 0]])
+        v = np.array([[v0, 0, 0], [-v0, 0, 0]])
+        s = dem.run_steps(dem.init(x, v), int(3 * t_contact / dem.dt))
+        assert float(s.position[1, 0] - s.position[0, 0]) > 2 * r, "must have separated"
+        vv = np.asarray(s.velocity)
+        out.append(-(vv[1, 0] - vv[0, 0]) / (-2 * v0))
+    return np.array(out)
 
 
 def test_restitution_conversion_roundtrip():
@@ -50,9 +53,13 @@ def test_restitution_conversion_roundtrip():
 
 @pytest.mark.parametrize("e", [0.5, 0.8])
 def test_head_on_collision_restitution(e):
-    """Default convention: the requested e comes out (small dt: safety factor 0.005; the error
-    is first order in dt, see drumheat/mechanics/integrator.py)."""
-    assert _collide(e, "no_attraction", 0.005) == pytest.approx(e, abs=1e-3)
+    """Default convention: the requested e comes out at small dt (0.005 t_crit, ~220 steps per
+    contact). The discretisation error is first order in dt and depends on where in a step
+    the contact begins (+1.3e-3 .. -0.9e-3 for e = 0.5); averaged over the onset phase it is
+    a few 1e-4."""
+    es = _collide(e, "no_attraction", 0.005)
+    assert np.all(np.abs(es - e) < 2e-3)
+    assert np.mean(es) == pytest.approx(e, abs=1e-3)
 
 
 def test_head_on_collision_linear_convention_predicted():
@@ -60,12 +67,14 @@ def test_head_on_collision_linear_convention_predicted():
     Schwager-Poeschel value for that damping ratio, not e."""
     z = damping_ratio_from_restitution(0.5, "linear")
     expected = restitution_from_damping_ratio(z, "no_attraction")
-    assert _collide(0.5, "linear", 0.005) == pytest.approx(expected, abs=1e-3)
+    assert expected - 0.5 > 0.04  # distinguishable from the requested 0.5
+    assert np.mean(_collide(0.5, "linear", 0.005)) == pytest.approx(expected, abs=1e-3)
 
 
 def test_elastic_collision_restitution_one():
     """Velocity Verlet on the one-sided spring is exact only as dt -> 0 (entry/exit error)."""
-    assert _collide(1.0, "no_attraction", 0.01) == pytest.approx(1.0, abs=1e-3)
+    es = _collide(1.0, "no_attraction", 0.01)
+    assert np.all(np.abs(es - 1.0) < 1e-4)
 
 
 def _incline(theta_deg, mu, rotation, t_end=0.3, k=1e5, r=0.005):
@@ -214,7 +223,9 @@ def test_rolling_resistance_stops_rolling_oscillation():
         out[mu_r] = (np.max(np.abs(xs)), np.ptp(xs))
     # without: still rolling back and forth with about the initial amplitude
     assert out[0.0][1] > 2e-3
-    # with: at rest (static friction of rolling holds it on the gentle slope of the drum
-    # bottom, where tan(theta) = x/(R - r) < mu_r)
-    assert out[0.05][1] < 1e-7
+    # with: stopped on the gentle slope of the drum bottom (tan(theta) = x/(R - r) < mu_r),
+    # apart from the creep of the capped constant-torque model: the cap I |w|/dt balances the
+    # friction torque m g sin(theta) r at |w| = m g sin(theta) r dt / I, i.e. a creep speed
+    # of a few um/s here (documented in contact_forces.rolling_torque)
     assert out[0.05][0] < 0.05 * (R - r)
+    assert out[0.05][1] < 1e-5

@@ -79,6 +79,8 @@ def test_distributions_at_chosen_times(static):
         assert line.get_ydata()[-1] == pytest.approx(1.0)
     fig2 = plot.plot_distributions(static, times_index=[0, -1])
     assert len(fig2.axes[0].patches) == 2
+    fig3, axes = plt.subplots(2, 1)
+    assert plot.plot_distributions(static, times_index=[0], ax=axes) is fig3
 
 
 def test_alpha_overall_log_axes(heated, static):
@@ -90,6 +92,8 @@ def test_alpha_overall_log_axes(heated, static):
     assert any("-0.5" in s for s in _labels(a1))
     with pytest.raises(ValueError, match="alpha_overall"):
         plot.plot_alpha_overall(static)
+    fig2, axes = plt.subplots(1, 2)
+    assert plot.plot_alpha_overall(heated, ax=axes) is fig2
 
 
 def test_snapshot_to_scale_with_walls_and_colorbar(static):

@@ -12,11 +12,11 @@ from drumheat.scene import load_scene, scene_from_dict
 
 
 def mini(**motion):
-    """60 glass spheres d = 8 mm in a 100 mm drum heated through the wall (a small A8 bed)."""
+    """70 glass spheres d = 8 mm in a 100 mm drum heated through the wall (a small A8 bed)."""
     raw = dict(name="mini-random", dim=2,
                run=dict(duration=400.0, output_interval=10.0, seed=3),
                drum=dict(diameter=0.1, wall_temperature=343.0),
-               groups=[dict(name="glass", count=60, diameter=0.008, material="glass",
+               groups=[dict(name="glass", count=70, diameter=0.008, material="glass",
                             temperature=293.0)],
                heat=dict(contact=dict(alpha=57.0), wall=dict(alpha=114.0)),
                motion=dict(model="random", **{"t_R": 20.0, **motion}))
@@ -144,7 +144,7 @@ def test_gradient_matches_central_differences():
     s = mini().with_overrides({"run.duration": 100.0, "run.rtol": 1e-12, "run.atol": 1e-10})
     bed = make_motion(s)
     bed.autodiff = "forward"
-    w = np.arange(60) % 7 + 1.0  # a weighted particle average, sensitive to both parameters
+    w = np.arange(70) % 7 + 1.0  # a weighted particle average, sensitive to both parameters
 
     def f(p):
         T, _ = bed.solve({"heat.wall.alpha": p[0], "heat.contact.alpha": p[1]})

@@ -59,6 +59,8 @@ def integrate_network(scene: Scene, model: ThermalModel, net: ContactNetwork, y0
         If the explicit solver's step ``run.dt`` exceeds the stability limit.
     """
     run = scene.run
+    if model.internal is not None:
+        return _integrate_shells(scene, model, net, y0, t_out, progress, t_offset)
     dt = None
     if run.solver == "explicit":
         limit = _concrete(model.stability_limit(net))
@@ -82,9 +84,33 @@ def integrate_network(scene: Scene, model: ThermalModel, net: ContactNetwork, y0
     return states
 
 
-def stack_states(states, accounts):
-    """Stack a list of states into ``T (n_out, N)`` and ``{account: (n_out,)}``."""
+def _integrate_shells(scene, model, net, y0, t_out, progress, t_offset):
+    """:func:`integrate_network` for particles with radial shells ([heat.internal])."""
+    from drumheat.thermal.integrate import advance_shells
+    from drumheat.thermal.internal import ShellStepError, plan_step
+
+    try:
+        scheme, dt = plan_step(model, net, y0["T"], float(t_out[-1] - t_out[0]))
+    except ShellStepError as err:
+        raise SceneError("heat.internal.dt", scene.heat.internal.dt, str(err), scene.name) from None
+    states, y = [y0], y0
+    for t0, t1 in zip(t_out[:-1], t_out[1:]):
+        y = advance_shells(model, net, y, float(t0), float(t1), dt, scheme)
+        states.append(y)
+        if progress is not None:
+            progress.update_to(t_offset + t1)
+    return states
+
+
+def stack_states(states, accounts, model: ThermalModel | None = None):
+    """Stack a list of states into ``T (n_out, N)`` and ``{account: (n_out,)}``.
+
+    With internal conduction (``model.internal``) ``T`` is each particle's enthalpy-mean
+    temperature (staltner [7.1]-[7.3]); the profiles are in the states.
+    """
     T = jnp.stack([s["T"] for s in states])
+    if model is not None and model.internal is not None:
+        T = model.internal.mean_temperature(T)
     Q = {a: jnp.stack([s["Q"][a] for s in states]) for a in accounts}
     return T, Q
 
@@ -135,7 +161,8 @@ class StaticBed:
         model, T0 = self.model(params)
         states = integrate_network(self.scene, model, self.net, initial_state(model, T0),
                                    self.t_out, progress, autodiff=self.autodiff)
-        return stack_states(states, model.accounts)
+        self._last_states = states
+        return stack_states(states, model.accounts, model)
 
     def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
         """Run the scene and collect what the result files need."""
@@ -151,4 +178,14 @@ class StaticBed:
             capacity=np.asarray(model.particles.capacity), group=group_index(self.scene),
             n_contacts=np.full(n_out, len(self.pairs)),
             n_wall_contacts=np.full(n_out, len(self.wall_particles)),
-            wall_area=np.full(n_out, float(np.sum(d[self.wall_particles] ** 2))))
+            wall_area=np.full(n_out, float(np.sum(d[self.wall_particles] ** 2))),
+            stored_heat=shell_stored_heat(model, self._last_states))
+
+
+def shell_stored_heat(model: ThermalModel, states):
+    """Stored heat change since the first state (J, (n_out,)) from the shell enthalpies, or None
+    for lumped particles (the runner then uses ``sum m c (T - T0)``)."""
+    if model.internal is None:
+        return None
+    H = np.asarray([float(jnp.sum(model.internal.stored_heat(s["T"]))) for s in states])
+    return H - H[0]

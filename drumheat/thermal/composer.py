@@ -1,16 +1,22 @@
 """Compose the thermal model of a scene from exactly the effects it lists.
 
-Each effect is an equinox module in its own file (``contact.py``, ``wall.py``, ``loss.py``)
-with one method, ``heat_flow(T, particles, net) -> W into each particle``, and a class attribute
-``account`` naming the outside reservoir it exchanges with (``None`` for exchanges inside the
-bed). The registry below maps a ``[heat.<name>]`` table to the function building the effect;
-adding an effect is one new file plus one entry here. Effects whose table is absent are not
-built, so they are not in the traced program at all.
+Each effect is an equinox module in its own file (``contact.py``, ``wall.py``, ``loss.py``,
+``convection.py``, ``radiation.py``) with one method, ``heat_flow(T, particles, net) -> W into
+each particle``, and a class attribute ``account`` naming the outside reservoir it exchanges
+with (``None`` for exchanges inside the bed). The registry below maps a ``[heat.<name>]`` table
+to the function building the effect; adding an effect is one new file plus one entry here.
+Effects whose table is absent are not built, so they are not in the traced program at all.
+
+One entry is not a heat flow but a state extension: ``[heat.internal]``
+(:mod:`drumheat.thermal.internal`, class attribute ``role = "state"``) gives every particle a
+radial shell profile; the model then carries it in :attr:`ThermalModel.internal`, the effects
+act on the surface node and the integrators of :mod:`drumheat.thermal.integrate` switch to the
+shell schemes. Without it ``internal`` is None and nothing changes.
 """
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Optional
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -48,7 +54,29 @@ def _mean_diameter(scene):
     return sum(g.count * g.diameter for g in scene.groups) / n
 
 
-def _contact(scene, value: ValueFn) -> ContactConduction:
+def temperature_bounds(scene) -> tuple[float, float]:
+    """Lowest and highest temperature a run of ``scene`` can reach, K.
+
+    By the maximum principle every temperature stays between the extremes of the initial
+    temperatures and of all outside reservoirs (gas, walls, radiating surfaces). Used to bound
+    temperature-dependent conductances (stability limits) and to warn about property fits.
+    """
+    Ts = [g.temperature for g in scene.groups]
+    if scene.gas is not None:
+        Ts.append(scene.gas.temperature)
+    if scene.drum is not None and scene.drum.wall_temperature is not None:
+        Ts.append(scene.drum.wall_temperature)
+    r = scene.heat.radiation
+    if r is not None:
+        if r.sink_temperature is not None:
+            Ts.append(r.sink_temperature)
+        Ts += [x.temperature for x in (r.surfaces or ())]
+    if scene.granulator is not None:
+        Ts.append(scene.granulator.wall_temperature)
+    return float(min(Ts)), float(max(Ts))
+
+
+def _contact(scene, value: ValueFn, particles=None) -> ContactConduction:
     cfg = scene.heat.contact
     if cfg.model == "constant":
         alpha = value("heat.contact.alpha")
@@ -57,7 +85,7 @@ def _contact(scene, value: ValueFn) -> ContactConduction:
     return ContactConduction(alpha=jnp.asarray(alpha, float))
 
 
-def _wall(scene, value: ValueFn) -> WallConduction:
+def _wall(scene, value: ValueFn, particles=None) -> WallConduction:
     cfg = scene.heat.wall
     if cfg.model == "constant":
         alpha = value("heat.wall.alpha")
@@ -68,16 +96,37 @@ def _wall(scene, value: ValueFn) -> WallConduction:
                               value("drum.wall_temperature"), float)))
 
 
-def _loss(scene, value: ValueFn) -> HeatLoss:
+def _loss(scene, value: ValueFn, particles=None) -> HeatLoss:
     return HeatLoss(alphaA=jnp.asarray(value("heat.loss.alphaA"), float),
                     gas_temperature=jnp.asarray(value("gas.temperature"), float))
 
 
-#: ``[heat.<name>]`` -> builder(scene, value) of the effect module.
+def _convection(scene, value: ValueFn, particles=None):
+    from drumheat.thermal.convection import build_convection
+
+    return build_convection(scene, value, particles, temperature_bounds(scene))
+
+
+def _radiation(scene, value: ValueFn, particles=None):
+    from drumheat.thermal.radiation import build_radiation
+
+    return build_radiation(scene, value, particles, temperature_bounds(scene))
+
+
+def _internal(scene, value: ValueFn, particles=None):
+    from drumheat.thermal.internal import build_internal
+
+    return build_internal(scene, value, particles)
+
+
+#: ``[heat.<name>]`` -> builder(scene, value, particles) of the effect module.
 EFFECTS: dict[str, Callable] = {
     "contact": _contact,
     "wall": _wall,
     "loss": _loss,
+    "convection": _convection,
+    "radiation": _radiation,
+    "internal": _internal,
 }
 
 
@@ -92,6 +141,7 @@ class ThermalModel(eqx.Module):
 
     particles: ThermalParticles
     effects: tuple
+    internal: Optional[eqx.Module] = None
 
     @property
     def accounts(self) -> tuple[str, ...]:
@@ -110,11 +160,18 @@ class ThermalModel(eqx.Module):
                 external[effect.account] = external[effect.account] + jnp.sum(q)
         return total, external
 
-    def conductance_sum(self, net: ContactNetwork) -> Array:
-        """Sum over all pipes of alpha A at each particle, W/K (weigler eq. [2.2])."""
+    def conductance_sum(self, net: ContactNetwork, T: Array | None = None) -> Array:
+        """Sum over all pipes of alpha A at each particle, W/K (weigler eq. [2.2]).
+
+        Temperature-dependent effects (radiation, film-temperature convection) use ``T`` (the
+        particle or surface temperatures), else their bound over the reachable temperatures.
+        """
         s = jnp.zeros_like(self.particles.diameter)
         for effect in self.effects:
-            s = s + effect.conductance_sum(self.particles, net)
+            if getattr(effect, "state_dependent", False):
+                s = s + effect.conductance_sum(self.particles, net, T)
+            else:
+                s = s + effect.conductance_sum(self.particles, net)
         return s
 
     def stability_limit(self, net: ContactNetwork) -> Array:
@@ -131,5 +188,8 @@ class ThermalModel(eqx.Module):
 
 def make_thermal_model(scene, particles: ThermalParticles, value: ValueFn) -> ThermalModel:
     """Build the thermal model of ``scene`` with exactly the effects it lists."""
-    effects = tuple(EFFECTS[name](scene, value) for name in scene.heat.effects())
-    return ThermalModel(particles=particles, effects=effects)
+    built = [EFFECTS[name](scene, value, particles) for name in scene.heat.effects()]
+    state = [b for b in built if getattr(b, "role", None) == "state"]
+    effects = tuple(b for b in built if getattr(b, "role", None) != "state")
+    return ThermalModel(particles=particles, effects=effects,
+                        internal=state[0] if state else None)

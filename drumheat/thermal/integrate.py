@@ -9,6 +9,11 @@ Two families:
   (implicit, for stiff scenes such as very large wall coefficients), tolerances from the scene;
 * explicit: fixed-step forward Euler whose step must respect ``dt < m c / sum(alpha A)``
   (eq. [2.2]); a larger step is refused, never run.
+
+With ``[heat.internal]`` (``model.internal`` not None) the state's ``T`` is ``(N, n_shells)``
+and :func:`advance_shells` replaces both: fixed steps of the unconditionally stable implicit
+shell scheme or of the thesis' explicit scheme with its limit enforced
+(:mod:`drumheat.thermal.internal`); :func:`drumheat.thermal.internal.plan_step` chooses the step.
 """
 
 from __future__ import annotations
@@ -29,8 +34,13 @@ class ThermalStabilityError(ValueError):
 
 
 def initial_state(model: ThermalModel, T0) -> dict:
-    """ODE state at t = 0: temperatures and zero exchanged heat per account."""
+    """ODE state at t = 0: temperatures and zero exchanged heat per account.
+
+    ``T0`` (N,) particle temperatures; with internal conduction uniform profiles (N, n_shells).
+    """
     T0 = jnp.asarray(T0, float)
+    if model.internal is not None and T0.ndim == 1:
+        T0 = model.internal.initial(T0)
     return {"T": T0, "Q": {a: jnp.zeros((), T0.dtype) for a in model.accounts}}
 
 
@@ -110,3 +120,29 @@ def check_explicit_step(model: ThermalModel, net: ContactNetwork, dt: float | No
             f"min(m c / sum(alpha A)) = {limit:.4g} s (weigler eq. [2.2]); use dt <= "
             f"{limit:.4g} s or an adaptive/implicit solver")
     return dt
+
+
+@eqx.filter_jit
+def _shell_scan(model, net, y, h, n_steps: int, scheme: str):
+    from drumheat.thermal import internal
+
+    step = internal.implicit_step if scheme == "implicit" else internal.explicit_step
+
+    def body(y, _):
+        T, dQ = step(model, net, y["T"], h)
+        return {"T": T, "Q": {a: y["Q"][a] + dQ[a] for a in y["Q"]}}, None
+
+    y, _ = jax.lax.scan(body, y, None, length=n_steps)
+    return y
+
+
+def advance_shells(model: ThermalModel, net: ContactNetwork, y, t0: float, t1: float,
+                   dt: float, scheme: str = "implicit"):
+    """Advance a shell state from t0 to t1 in equal steps no larger than ``dt``.
+
+    ``scheme`` "implicit" (backward Euler, any dt) or "explicit" (the caller has checked dt
+    with :func:`drumheat.thermal.internal.plan_step`; each step checks again at run time and
+    raises rather than run above the limit).
+    """
+    n, h = explicit_steps(t0, t1, dt)
+    return _shell_scan(model, net, y, jnp.asarray(h, float), n, scheme)
