@@ -401,6 +401,9 @@ class GranulatorConfig:
                                  "temperature T_m (the digest's consistent reading).")
     segments: int = spec(20, ge=1, doc="Path segments per flight phase; the radiation sink "
                                        "temperature is taken at each segment's midpoint.")
+    steps_per_phase: int = spec(400, ge=10, doc="Shell time steps per phase when "
+                                                "heat.internal.dt is not given (Phase 2: per "
+                                                "estimated contact time).")
 
 
 @dataclass(frozen=True)
@@ -688,7 +691,15 @@ def _check_consistency(s: Scene) -> None:
             raise SceneError("heat.contact" if s.heat.contact else "heat.wall", "a table",
                              "a single droplet has no contacts; Phase-2 wall contact is part of "
                              "motion model 'granulator'", n)
+        if s.n_particles != 1:
+            raise SceneError("groups", f"{s.n_particles} particles", "motion model 'granulator' "
+                             "follows one droplet (one group with count = 1); run one scene per "
+                             "size class", n)
         g = s.granulator
+        if g.disc_height is not None and not g.h3 <= g.disc_height < g.h3 + g.h4:
+            raise SceneError("granulator.disc_height", g.disc_height, "the horizontal Phase-1 "
+                             f"path must hit the water-cooled cone: h3 <= disc_height < h3 + h4 "
+                             f"= {g.h3 + g.h4:g} m", n)
         if g.h4 / math.tan(math.radians(g.alpha4)) >= g.r2:
             raise SceneError("granulator.h4", g.h4, "the cone closes before its top "
                              "(r5 = r2 - h4/tan(alpha4) <= 0); reduce h4 or raise alpha4", n)

@@ -314,9 +314,16 @@ class DEM:
                 grow_pairs = bool(code & partition.PEC.NEIGHBOR_LIST_OVERFLOW)
                 grow_cells = bool(code & partition.PEC.CELL_LIST_OVERFLOW)
                 cell_cap = start.nbrs.cell_list_capacity or 0
+                need = cap
+                if grow_pairs:
+                    need = 2 * cap
+                    if bool(jnp.all(jnp.isfinite(new.position))):
+                        # pairs where the failed chunk ended: a good estimate of what it needs
+                        est = self.neighbor.count_pairs(new.position)
+                        need = max(need, int(est * self.neighbor.capacity_multiplier) + 1)
                 start = self.reallocate(
                     start,
-                    pair_capacity=2 * cap if grow_pairs else cap,
+                    pair_capacity=need,
                     extra_cell_capacity=(max(1, cell_cap // 2) * (attempt + 1)
                                          if grow_cells else 0))
             else:

@@ -11,6 +11,8 @@
   cutoff ``2 r_max + skin`` passed in full); the integrator decides when: as soon as some
   particle has moved more than ``skin / 2`` since the last build (the usual Verlet-list
   criterion), so no pair can come into contact unseen.
+* Pair order: after every build the pairs are sorted by ``(i, j)`` (:func:`sort_pairs`), so
+  force sums do not depend on when the list was built.
 * History across rebuilds: after a rebuild, :func:`remap_pair_data` finds every new pair in the
   old pair list (sort + binary search on the key ``i (N+1) + j``) and carries its data over;
   new pairs start with zero history.
@@ -32,6 +34,7 @@ __all__ = [
     "make_neighbor_setup",
     "remap_pair_data",
     "pair_keys",
+    "sort_pairs",
 ]
 
 
@@ -96,6 +99,20 @@ def remap_pair_data(old_idx, old_data, new_idx, n):
     return jnp.where(mask, gathered, 0)
 
 
+def sort_pairs(nbrs, n):
+    """The neighbour list with its pairs in canonical order (by ``i (N+1) + j``, padding last).
+
+    A canonical order makes the force sums (``segment_sum`` over the pairs) independent of when
+    the list was built: a run that rebuilds every step and one that rebuilds rarely add the
+    same non-zero contributions in the same order, so their trajectories agree bit for bit.
+    It also groups each particle's pairs in memory.
+    """
+    import dataclasses
+
+    order = jnp.argsort(pair_keys(nbrs.idx, n))
+    return dataclasses.replace(nbrs, idx=nbrs.idx[:, order])
+
+
 @dataclass(frozen=True)
 class NeighborSetup:
     """Static description of the neighbour search (built by :func:`make_neighbor_setup`).
@@ -141,11 +158,16 @@ class NeighborSetup:
         if nbrs.max_occupancy != target:
             nbrs = dataclasses.replace(nbrs, max_occupancy=target)
             nbrs = self.neighbor_fns.update(pos, nbrs)
-        return nbrs
+        return sort_pairs(nbrs, n)
+
+    def count_pairs(self, position):
+        """Number of pairs within the cutoff at ``position`` (host-side, for sizing buffers)."""
+        nbrs = self.neighbor_fns.allocate(self.to_box(position))
+        return int(jnp.sum(nbrs.idx[0] < position.shape[0]))
 
     def rebuild(self, position, nbrs):
         """Rebuild the list at ``position`` with the existing capacities (jittable)."""
-        return self.neighbor_fns.update(self.to_box(position), nbrs)
+        return sort_pairs(self.neighbor_fns.update(self.to_box(position), nbrs), position.shape[0])
 
     def max_displacement_sq(self, position, nbrs):
         """Largest squared displacement (m^2) of any particle since the last build."""

@@ -289,9 +289,11 @@ class ShellStepError(ValueError):
 def plan_step(model, net, T0, duration=None):
     """Scheme and step of a run: ``(scheme, dt)`` (concrete), refusing an unstable explicit step.
 
-    Default dt: the explicit limit at the start (0.9 of it for the explicit scheme; for the
-    implicit scheme the limit is a natural accuracy scale, never a stability need), at most
-    ``duration / 20``. ``"explicit"`` with dt above the limit: :class:`ShellStepError` with the
+    Default dt: explicit scheme 0.9 times its limit at the start; implicit scheme (stable at any
+    dt, so dt is an accuracy choice) 0.05 times the lumped surface time constant
+    ``min_i m_i c_i / sum(alpha A)_i`` (internal modes faster than that are damped correctly by
+    backward Euler), at most ``duration / 20``; set ``heat.internal.dt`` to resolve fast
+    surface transients. ``"explicit"`` with dt above the limit: :class:`ShellStepError` with the
     numbers (``on_unstable = "refuse"``) or the implicit scheme with a warning
     (``on_unstable = "implicit"``).
     """
@@ -307,9 +309,18 @@ def plan_step(model, net, T0, duration=None):
     if it.dt is not None:
         dt = float(it.dt)
     else:
-        dt = (0.9 if it.scheme == "explicit" else 1.0) * limit
-        if duration is not None and math.isfinite(duration):
+        if it.scheme == "explicit":
+            dt = 0.9 * limit
+        else:
+            Ts = jnp.asarray(T0, float)[:, -1]
+            g = model.conductance_sum(net, Ts)
+            tau = float(jnp.min(jnp.where(g > 0, model.particles.capacity / jnp.where(
+                g > 0, g, 1.0), jnp.inf)))
+            dt = 0.05 * tau
+        if duration is not None and math.isfinite(duration) and duration > 0:
             dt = min(dt, duration / 20.0)
+        if not math.isfinite(dt):
+            dt = limit if math.isfinite(limit) else 1.0
     if it.scheme == "explicit" and dt > limit:
         msg = shells._refusal_message(dt, np.asarray(nodes), it.grid)
         if it.on_unstable == "refuse":
