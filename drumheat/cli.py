@@ -42,6 +42,14 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_explain(args) -> int:
+    from drumheat.advisor import explain
+    from drumheat.scene import load_scene
+
+    print(explain(load_scene(args.scene, args.set)).text())
+    return 0
+
+
 def _cmd_animate(args) -> int:
     from drumheat.animate import AnimationError, animate
 
@@ -74,6 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "groups.0.temperature=300 (repeatable)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
+    e = sub.add_parser("explain", help="size of each heat-transfer effect in a scene, and which "
+                                       "to drop or add")
+    e.add_argument("scene", help="built-in scene name or path to a .toml scene file")
+    e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene value by its dotted key (repeatable)")
+    e.set_defaults(func=_cmd_explain)
     a = sub.add_parser("animate", help="animate a result folder: the drum coloured by "
                                        "temperature, with a clock (GIF or MP4)")
     a.add_argument("result_dir", metavar="RESULT_DIR",

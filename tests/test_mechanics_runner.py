@@ -23,8 +23,8 @@ from drumheat.mechanics.pour import insertion_sites
 R2D, RP = 0.025, 0.002
 
 
-def _drum2d_positions(n, R=R2D, r=RP):
-    sites = insertion_sites([DrumShell(R)], 2, 2.2 * r, 1.05 * r)
+def _drum2d_positions(n, R=R2D, r=RP, spacing=2.2):
+    sites = insertion_sites([DrumShell(R)], 2, spacing * r, 1.05 * r)
     sites = sites[np.argsort(sites[:, 1], kind="stable")]
     return sites[:n]
 
@@ -87,7 +87,7 @@ def test_neighbour_overflow_is_reallocated_and_redone():
     falls together; run() discards the chunk, reallocates and redoes it, and the result is the
     same as with a well-sized list from the start."""
     dem = _drum2d()
-    grid = _drum2d_positions(40)
+    grid = _drum2d_positions(40, spacing=2.6)  # 5.2 mm apart: beyond the 5 mm cutoff
     tiny = dem.init(grid, pair_capacity=1)
     big = dem.init(grid)
     assert tiny.nbrs.idx.shape[1] == 1 and big.nbrs.idx.shape[1] >= 160
@@ -107,15 +107,17 @@ def test_neighbour_overflow_is_reallocated_and_redone():
 
 def test_escape_nan_and_overlap_stop_the_run(settled_2d):
     dem, s0 = settled_2d
-    # a particle outside the drum, flying away
+    # a particle outside the drum (inserted there, or tunnelled out): detected after the
+    # first chunk (here one step; with longer chunks the shell would first throw it back and
+    # the run would stop on the overlap check instead)
     pos = np.asarray(s0.position).copy()
     vel = np.asarray(s0.velocity).copy()
     pos[5] = [0.0, R2D + 0.01]
     vel[5] = [0.0, 1.0]
     with pytest.raises(ParticleEscapeError) as err:
-        dem.run(s0._replace(position=jnp.asarray(pos), velocity=jnp.asarray(vel)), 200,
-                chunk=100)
+        dem.run(s0._replace(position=jnp.asarray(pos), velocity=jnp.asarray(vel)), 10, chunk=1)
     assert err.value.state is not None and "particle 5" in str(err.value)
+    assert int(err.value.state.step) == int(s0.step)
     # NaN
     vel = np.asarray(s0.velocity).copy()
     vel[3, 0] = np.nan
@@ -125,7 +127,7 @@ def test_escape_nan_and_overlap_stop_the_run(settled_2d):
     assert np.all(np.isfinite(np.asarray(err.value.state.position)))
     # overlap of 80 % of the radius between particles 0 and 1
     pos = np.asarray(s0.position).copy()
-    pos[1] = pos[0] + np.array([0.2 * 2 * RP + 1.2 * RP - 1.2 * RP, 0.0]) + [2 * RP * 0.6, 0]
+    pos[1] = pos[0] + np.array([1.2 * RP, 0.0])
     with pytest.raises(OverlapError) as err:
         dem.run(s0._replace(position=jnp.asarray(pos)), 10, chunk=10)
     assert "overlap" in str(err.value)
@@ -178,15 +180,27 @@ def test_extra_update_runs_contact_conduction_in_the_scan(settled_2d):
     assert np.ptp(T) < 40.0
 
 
-def test_float32_mechanics_follow_float64(settled_2d):
+def test_float32_mechanics_stay_float32_and_agree_statistically(settled_2d):
+    """dtype=float32: the mechanical state stays float32 (time float64). The bed is chaotic
+    (a 1e-15 m perturbation reaches 1e-6 m in 100 steps), so float32 and float64 runs are
+    compared after 1 step (round-off) and by the bed's centre of mass after 0.3 s."""
     dem, s0 = settled_2d
     dem32 = _drum2d(dtype=jnp.float32)
     s32 = dem32.init(s0.position, s0.velocity, s0.angular_velocity, time=s0.time)
-    assert s32.position.dtype == jnp.float32 and s32.time.dtype == jnp.float64
-    s32 = dem32.run(s32, 2000, chunk=2000)
-    s64 = dem.run(dem.init(s0.position, s0.velocity, s0.angular_velocity, time=s0.time), 2000,
-                  chunk=2000)
-    assert np.max(np.abs(np.asarray(s32.position) - np.asarray(s64.position))) < 1e-5
+    s64 = dem.init(s0.position, s0.velocity, s0.angular_velocity, time=s0.time)
+    a = dem32.run_steps(s32, 1)
+    b = dem.run_steps(s64, 1)
+    assert np.max(np.abs(np.asarray(a.position) - np.asarray(b.position))) < 1e-8
+    n = int(0.3 / dem.dt)
+    s32 = dem32.run(s32, n, chunk=n)
+    s64 = dem.run(s64, n, chunk=n)
+    for leaf in (s32.position, s32.velocity, s32.angular_velocity, s32.force, s32.pair_spring):
+        assert leaf.dtype == jnp.float32
+    assert s32.time.dtype == jnp.float64
+    c32 = center_of_mass(np.asarray(s32.position))
+    c64 = center_of_mass(np.asarray(s64.position))
+    assert c32[0] > 0.002 and c64[0] > 0.002
+    assert np.max(np.abs(c32 - c64)) < 2e-3
 
 
 def test_2d_drum_turns_stably_and_lifts_the_bed(settled_2d):
@@ -203,11 +217,11 @@ def test_2d_drum_turns_stably_and_lifts_the_bed(settled_2d):
 def test_3d_periodic_drum_turns_stably():
     R, r, L = 0.025, 0.002, 0.016
     sites = insertion_sites([DrumShell(R)], 3, 2.2 * r, 1.05 * r, periodic_length=L)
-    sites = sites[np.argsort(sites[:, 1], kind="stable")][:150]
+    sites = sites[np.argsort(sites[:, 1], kind="stable")][:100]
     part = make_particles(np.full(len(sites), r), 2500.0)
     p = contact_params(2e4, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
     dem = make_dem(part, [DrumShell(R, rpm=60.0)], p, dim=3, periodic_length=L)
-    s = dem.run(dem.init(sites), int(3.0 / dem.dt), chunk=50000)
+    s = dem.run(dem.init(sites), int(2.0 / dem.dt), chunk=50000)  # 2 revolutions
     pos = np.asarray(s.position)
     assert np.all((pos[:, 2] >= 0) & (pos[:, 2] < L))
     assert np.all(np.linalg.norm(pos[:, :2], axis=1) < R)

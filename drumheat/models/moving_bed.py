@@ -440,18 +440,17 @@ def nusselt_sphere_gnielinski(Re, Pr, variant="exact"):
     ``variant="exact"`` (default) is this VDI form, as the digest prescribes (Sec. 14.1).
     ``variant="source_tables"`` uses ``Pr^0.33``, ``Re^(-0.3)`` and ``Pr^0.66``, the variant the
     thesis' Tables 10.8.1/10.8.2 follow: only for reproducing those tables.
+
+    The formulas live in :func:`drumheat.models.convection.gnielinski_sphere_nu` (variants
+    ``"vdi"`` and ``"kraychev_tables"``); this name is kept for the moving-bed API.
     """
-    Re = jnp.asarray(Re, dtype=float)
-    Pr = jnp.asarray(Pr, dtype=float)
-    if variant == "exact":
-        nu_lam = 0.664 * Re**0.5 * Pr ** (1.0 / 3.0)
-        nu_turb = 0.037 * Re**0.8 * Pr / (1.0 + 2.443 * Re**-0.1 * (Pr ** (2.0 / 3.0) - 1.0))
-    elif variant == "source_tables":
-        nu_lam = 0.664 * Re**0.5 * Pr**0.33
-        nu_turb = 0.037 * Re**0.8 * Pr / (1.0 + 2.443 * Re**-0.3 * (Pr**0.66 - 1.0))
-    else:
+    from drumheat.models.convection import gnielinski_sphere_nu
+
+    names = {"exact": "vdi", "source_tables": "kraychev_tables"}
+    if variant not in names:
         raise ValueError(f"variant = {variant!r}: use 'exact' or 'source_tables'.")
-    return 2.0 + jnp.sqrt(nu_lam**2 + nu_turb**2)
+    return gnielinski_sphere_nu(jnp.asarray(Re, dtype=float), jnp.asarray(Pr, dtype=float),
+                                variant=names[variant])
 
 
 # --------------------------------------------------------------------------------------------

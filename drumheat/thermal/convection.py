@@ -285,4 +285,26 @@ def build_convection(scene, value, particles: ThermalParticles, T_bounds) -> Con
             jnp.broadcast_to(Tg, particles.diameter.shape), particles)
         alpha = series_with_transient_sphere(a_ext, particles.diameter, lam_p, rho_c,
                                              value("run.duration"))
-    return eqx.tree_at(lambda c: c.alpha_value, conv, alpha, is_leaf=lambda x: x is None)
+    conv = eqx.tree_at(lambda c: c.alpha_value, conv, alpha, is_leaf=lambda x: x is None)
+    if scene.motion.model == "fluidized":
+        return plug_flow(scene, value, particles, conv)
+    return conv
+
+
+def plug_flow(scene, value, particles, conv) -> PlugFlowConvection:
+    """Wrap ``conv`` for gas in plug flow through the bed (motion model ``fluidized``).
+
+    The simulated particles stand for the bed cross-section ``f = sum(m_i) / m_1`` (loading m_1,
+    fluidized-bed-exercise.md section 4), through which ``mdot_2 f`` of gas flows; c_p of the gas
+    from ``gas.heat_capacity`` or the library. Layers are assigned in turn (0, 1, ..., L-1, 0,
+    ...); the motion model re-draws them.
+    """
+    from drumheat.materials import gas as gas_lib
+
+    f = jnp.sum(particles.mass) / value("motion.loading")
+    cp = value("gas.heat_capacity") if scene.gas.heat_capacity is not None else gas_lib(
+        scene.gas.material).heat_capacity
+    W = value("gas.mass_flux") * f * cp
+    L = scene.motion.layers
+    layer = jnp.arange(particles.diameter.shape[0]) % L
+    return PlugFlowConvection(conv, jnp.asarray(W, float), layer, L)

@@ -1,0 +1,270 @@
+"""Effect advisor: how large is each heat-transfer effect in a scene? (``drumheat explain``)
+
+For the scene's conditions at the start of a run, every effect gets a conductance per particle
+``G`` (W/K), a driving temperature difference ``dT`` (K) and so a heat flow ``G dT`` (W per
+particle); sizes are shown relative to the largest. Effects the scene leaves out are estimated
+too, so the advisor can say which included effects are negligible and which absent ones are not:
+
+* contact conduction: ``alpha_pp pi d^2/4`` times the mean number of contacts per particle (from
+  the scene's packing for static beds, else 4 in 2D / 6 in 3D), ``dT`` the spread of the
+  initial temperatures (weigler-thermal-dem.md eq. [2.7]); absent tables estimated with the
+  Schluender alpha_pp (weigler eqs. [2.9], [2.10]);
+* wall contact: ``alpha_wp pi d^2/4`` times the fraction of particles touching the wall, ``dT =
+  T_wall - T``; for the granulator droplet the Phase-2 contact (staltner [3.10]-[3.11]) with
+  the mean coefficient ``2 b_eff / sqrt(pi t_2)`` of two semi-infinite bodies (weigler [1.12]);
+* heat loss: ``(alpha A)_WK``, ``dT = T_gas - T``;
+* convection: ``alpha pi d^2`` from the scene's correlation; absent: the conduction limit
+  Nu = 2 (``alpha = 2 lambda_gas / d``, kraychev (3-3)), a lower bound;
+* radiation: ``h_r pi d^2``, ``h_r = eps sigma (T^2 + T_r^2)(T + T_r)`` (staltner digest
+  section 4); absent: a black surrounding at the wall (else gas) temperature;
+* an external effect that is small at the start but acts over the whole run (``G t_run / (m c)
+  >= 0.05``, it moves the bed mean by more than 5 % of its driving difference) is kept;
+* conduction inside the particles: the Biot number ``Bi = h R / lambda_p`` with ``h`` the sum
+  of all surface coefficients of the included effects (the largest case: contacts and walls on
+  their share of the surface) -- lumped particles are fine for Bi < 0.1.
+
+The verdicts: an included effect below 1 % of the largest "could be dropped"; an absent one
+above 5 % "should be added"; ``[heat.loss]`` lumps convection and radiation, so those two are
+"covered" when it is present.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SIGMA = 5.670374419e-8
+
+
+@dataclass
+class Term:
+    """One effect's size."""
+
+    name: str
+    table: str
+    included: bool
+    conductance: float  # W/K per particle
+    dT: float  # K
+    note: str = ""
+    relative: float = 0.0
+    verdict: str = ""
+
+    @property
+    def heat_flow(self) -> float:
+        return abs(self.conductance * self.dT)
+
+
+@dataclass
+class Advice:
+    """The advisor's findings for one scene."""
+
+    scene: str
+    conditions: str
+    terms: list = field(default_factory=list)
+    biot: float = 0.0
+    biot_verdict: str = ""
+
+    def text(self) -> str:
+        lines = [f"drumheat explain: {self.scene}", self.conditions, ""]
+        head = (f"{'effect':<22} {'table':<18} {'in scene':<8} {'G / (W/K)':>10} "
+                f"{'dT / K':>8} {'G dT / W':>10} {'relative':>9}  verdict")
+        lines += [head, "-" * len(head)]
+        for t in self.terms:
+            lines.append(f"{t.name:<22} {t.table:<18} {'yes' if t.included else 'no':<8} "
+                         f"{t.conductance:>10.3g} {t.dT:>8.3g} {t.heat_flow:>10.3g} "
+                         f"{t.relative:>9.2%}  {t.verdict}")
+            if t.note:
+                lines.append(f"{'':<22} {t.note}")
+        lines += ["", f"Biot number of the particles (h R / lambda_p, all surface exchange): "
+                      f"Bi = {self.biot:.3g}", f"  -> {self.biot_verdict}"]
+        return "\n".join(lines)
+
+
+def _props(scene):
+    from drumheat.materials import material
+
+    N = scene.n_particles
+    d = sum(g.count * g.diameter for g in scene.groups) / N
+    g0 = scene.groups[0]
+    m = material(g0.material)
+    lam = g0.conductivity or m.conductivity
+    eps = g0.emissivity or m.emissivity
+    rho = g0.density or m.density
+    c = g0.heat_capacity or m.heat_capacity
+    caps = [g.count * (g.density or material(g.material).density) * g.diameter**3
+            * (g.heat_capacity or material(g.material).heat_capacity) for g in scene.groups]
+    T0 = sum(cp * g.temperature for cp, g in zip(caps, scene.groups)) / sum(caps)
+    spread = max(g.temperature for g in scene.groups) - min(g.temperature for g in scene.groups)
+    return d, lam, eps, rho, c, T0, spread
+
+
+def explain(scene) -> Advice:
+    """Sizes of all effects for ``scene`` (a Scene, a built-in name or a path)."""
+    from drumheat.runner import make_motion
+    from drumheat.scene import Scene, load_scene
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    d, lam_p, eps, rho, c, T0, spread = _props(scene)
+    N = scene.n_particles
+    A_s, A_p = math.pi * d**2, math.pi * d**2 / 4
+    motion = make_motion(scene)
+    model, _ = motion.model()
+    net = motion.net
+    eff = {type(e).__name__: e for e in model.effects}
+    Tg = scene.gas.temperature if scene.gas is not None else None
+    T_wall = scene.drum.wall_temperature if scene.drum is not None else None
+    terms = []
+
+    # contact conduction
+    drum_bed = scene.motion.model in ("static", "random")
+    if drum_bed:
+        z = 2.0 * float(np.sum(np.asarray(net.pair_weight))) / N
+        frac_wall = float(np.sum(np.asarray(net.wall_weight))) / N
+    else:
+        z = 0.0 if scene.motion.model in ("granulator", "fluidized") else (4.0 if scene.dim == 2
+                                                                           else 6.0)
+        frac_wall = 0.0
+    if "ContactConduction" in eff:
+        alpha_pp = float(np.asarray(eff["ContactConduction"].alpha))
+    else:
+        alpha_pp = _schluender_alpha(scene, d)[1]
+    contact = Term("contact conduction", "[heat.contact]", scene.heat.contact is not None,
+                   alpha_pp * A_p * z, spread,
+                      f"{z:.2g} contacts per particle, alpha_pp = {alpha_pp:.3g} W/(m2 K)"
+                   if z else "no particle contacts in this motion model")
+    terms.append(contact)
+    # wall
+    if scene.motion.model == "granulator":
+        from drumheat.mixing.granulator import wall_heat_per_mass
+        from drumheat.models.sphere_conduction import effusivity
+
+        g = scene.granulator
+        mat = model.internal.material
+        import jax.numpy as jnp
+
+        Ts = jnp.asarray([T0])
+        b_S = float(effusivity(mat.conductivity(Ts), mat.heat_capacity(Ts), rho)[0])
+        b_W = float(effusivity(g.wall_conductivity, g.wall_heat_capacity, g.wall_density))
+        b = b_S * b_W / (b_S + b_W)
+        t2 = math.pi * (wall_heat_per_mass(g) * rho * d / 6 / (2 * b * (T0 - g.wall_temperature))) ** 2
+        h2 = 2 * b / math.sqrt(math.pi * t2)
+        terms.append(Term("wall contact (Phase 2)", "motion granulator", True, h2 * A_s,
+                          T0 - g.wall_temperature,
+                          f"two semi-infinite bodies, mean 2 b/sqrt(pi t2) = {h2:.3g} W/(m2 K) "
+                          f"over t2 ~ {1e3 * t2:.3g} ms (Phase 2 only)"))
+    elif T_wall is not None or scene.heat.wall is not None:
+        alpha_wp = float(np.asarray(eff["WallConduction"].alpha)) if "WallConduction" in eff \
+            else _schluender_alpha(scene, d)[0]
+        terms.append(Term("wall contact", "[heat.wall]", scene.heat.wall is not None,
+                          alpha_wp * A_p * frac_wall, (T_wall or T0) - T0,
+                          f"{frac_wall:.1%} of the particles touch the wall, alpha_wp = "
+                          f"{alpha_wp:.3g} W/(m2 K)"))
+    # heat loss
+    if scene.heat.loss is not None:
+        terms.append(Term("heat loss (lumped)", "[heat.loss]", True, scene.heat.loss.alphaA,
+                          Tg - T0, "lumps convection, radiation and losses through the drum"))
+    # convection
+    if Tg is not None:
+        if "Convection" in eff or "PlugFlowConvection" in eff:
+            conv = eff.get("Convection") or eff["PlugFlowConvection"].convection
+            import jax.numpy as jnp
+
+            a = float(conv.alpha(jnp.full(N, T0), model.particles)[0])
+            note = f"alpha = {a:.3g} W/(m2 K) ({scene.heat.convection.correlation})"
+        else:
+            from drumheat.materials import gas
+
+            lam_g = scene.gas.conductivity or gas(scene.gas.material).conductivity
+            a = 2.0 * lam_g / d
+            note = f"estimate: conduction limit Nu = 2, alpha = {a:.3g} W/(m2 K)"
+        terms.append(Term("convection", "[heat.convection]", scene.heat.convection is not None,
+                          a * A_s, Tg - T0, note))
+    # radiation
+    if "Radiation" in eff:
+        r = eff["Radiation"]
+        Tr = float(np.asarray(r.sink_temperature)[0])
+        e = float(np.asarray(r.emissivity)[0])
+        note = f"eps = {e:.2g}, T_rad = {Tr:.1f} K"
+        seen = 1.0
+    else:
+        Tr = T_wall if T_wall is not None else (Tg if Tg is not None else T0)
+        e = eps
+        # in a drum bed only the particles at the wall and at the free surface see the
+        # surroundings (about twice the wall-contact fraction); elsewhere an upper bound
+        seen = min(1.0, 2.0 * frac_wall) if drum_bed else 1.0
+        note = (f"estimate: black surrounding at {Tr:.1f} K, eps = {e:.2g}, "
+                + (f"{seen:.0%} of the particles see it" if drum_bed else
+                   "every particle sees it (upper bound)"))
+    h_r = e * SIGMA * (T0**2 + Tr**2) * (T0 + Tr)
+    terms.append(Term("radiation", "[heat.radiation]", scene.heat.radiation is not None,
+                      h_r * A_s * seen, Tr - T0, note + f", h_r = {h_r:.3g} W/(m2 K)"))
+    # heat brought in or taken out at the boundary must pass the contacts: their driving
+    # difference is at least the external one (a wall-heated bed starts uniform)
+    if contact.conductance > 0:
+        ext = [abs(t.dT) for t in terms if t is not contact and t.included]
+        contact.dT = max([spread] + ext)
+        if contact.dT > spread:
+            contact.note += (f"; dT = the external driving difference (initial spread "
+                             f"{spread:.3g} K)")
+
+    # relative sizes and verdicts
+    big = max(t.heat_flow for t in terms) or 1.0
+    loss = scene.heat.loss is not None
+    C = float(np.mean(np.asarray(model.particles.capacity)))
+    duration = float(scene.run.duration)
+    for t in terms:
+        t.relative = t.heat_flow / big
+        exposure = t.conductance * duration / C  # fraction of an e-folding over the run
+        if t.included:
+            if t.relative >= 0.01:
+                t.verdict = "keep"
+            elif t is not contact and exposure >= 0.05:
+                t.verdict = (f"keep (small now, but acts over the run: G t_run/(m c) = "
+                             f"{exposure:.2g})")
+            else:
+                t.verdict = "could be dropped (< 1 % of the largest)"
+        elif loss and t.name in ("convection", "radiation"):
+            t.verdict = "covered by [heat.loss]"
+        elif t.conductance == 0 or t.relative < 0.05:
+            t.verdict = "negligible (absent: fine)"
+        else:
+            t.verdict = "should be added (> 5 % of the largest)"
+    # Biot number: all surface exchange of included effects per particle surface
+    G_in = sum(t.conductance for t in terms if t.included)
+    h = G_in / A_s
+    Bi = h * (d / 2) / lam_p
+    if scene.heat.internal is not None:
+        lam_note = "" if scene.heat.internal.material == "constant" else \
+            f" (lambda_p = {lam_p:.3g} W/(m K) of the group; the T-dependent shell material varies)"
+        if scene.motion.model == "granulator":
+            mat = model.internal.material
+            import jax.numpy as jnp
+
+            lam_p = float(mat.conductivity(jnp.asarray(T0)))
+            G_flight = sum(t.conductance for t in terms if t.included and "Phase 2" not in t.name)
+            Bi = G_flight / A_s * (d / 2) / lam_p
+            lam_note = (f" (flight phases, lambda_p = {lam_p:.3g} W/(m K) at {T0:.0f} K; "
+                        "Phase 2 wall contact: Bi -> infinity)")
+        verdict = ("[heat.internal] included and needed (Bi > 0.1)" if Bi > 0.1 else
+                   "[heat.internal] included but could be dropped (Bi < 0.1: lumped particles "
+                   "suffice)") + lam_note
+    else:
+        verdict = ("lumped particles are fine (Bi < 0.1); [heat.internal] not needed" if Bi < 0.1
+                   else "internal gradients matter (Bi > 0.1): add [heat.internal]")
+    cond = (f"conditions at t = 0: {N} particle(s), d = {1e3 * d:.3g} mm "
+            f"{scene.groups[0].material}, T = {T0:.2f} K, motion '{scene.motion.model}'"
+            + (f", gas {Tg:.2f} K" if Tg is not None else "")
+            + (f", wall {T_wall:.2f} K" if T_wall is not None else ""))
+    return Advice(scene.name, cond, terms, Bi, verdict)
+
+
+def _schluender_alpha(scene, d):
+    """(alpha_wp, alpha_pp) from weigler eqs. [2.8]-[2.10] for the scene's gas."""
+    from drumheat.thermal.composer import _schluender
+
+    value = lambda key: scene.get(key)
+    a_wp, a_pp = _schluender(scene, value, d)
+    return float(a_wp), float(a_pp)
