@@ -33,6 +33,8 @@ def write_results(result, out_dir=None, figures: bool = True) -> Path:
                       group_names=np.array([g.name for g in result.scene.groups]))
         np.savez_compressed(tmp / "particles.npz", **arrays)
         (tmp / "scene.toml").write_text(result.scene.to_toml())
+        for name, writer in traj.files.items():  # the motion model's own files
+            writer(tmp / name)
         if figures:
             from drumheat import plot
 

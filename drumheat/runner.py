@@ -63,10 +63,7 @@ class Result:
         """Write the result files (see DESIGN.md) to ``out_dir`` (default results/<scene>)."""
         from drumheat.io import write_results
 
-        folder = write_results(self, out_dir, figures=figures)
-        for name, writer in self.trajectory.files.items():  # the motion model's own files
-            writer(folder / name)
-        return folder
+        return write_results(self, out_dir, figures=figures)
 
 
 def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:

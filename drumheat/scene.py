@@ -341,10 +341,12 @@ MOTION_MODELS = {
     "random": "drumheat.mixing.random:RandomBed",
     "granulator": "drumheat.mixing.granulator:GranulatorParticle",
     "fluidized": "drumheat.mixing.fluidized:FluidizedBed",
+    "dem": "drumheat.mixing.dem:DEMBed",
+    "replay": "drumheat.mixing.replay:ReplayBed",
 }
 
 #: Motion models whose particles lie in the drum of the ``[drum]`` table.
-DRUM_MOTION_MODELS = ("static", "random")
+DRUM_MOTION_MODELS = ("static", "random", "dem", "replay")
 
 
 @dataclass(frozen=True)
@@ -407,13 +409,80 @@ class GranulatorConfig:
 
 
 @dataclass(frozen=True)
+class DEMConfig:
+    """``[dem]``: soft-sphere mechanics of motion model 'dem' (drumheat.mechanics).
+
+    Linear spring-dashpot normal force, Cundall-Strack tangential spring with Coulomb limit,
+    rotation; weigler-thermal-dem.md sections 4-5 (Table 2-1, PFC settings).
+    """
+
+    stiffness: Optional[float] = spec(None, unit="N/m", gt=0,
+                                      doc="Normal (= tangential) stiffness k_n of particle "
+                                          "contacts; default E A_p / d_p (weigler eq. [2.3]). "
+                                          "A softer value allows a larger time step; the "
+                                          "contact conduction of drumheat does not depend on "
+                                          "the overlap, so softening changes the heat transfer "
+                                          "only through the motion.")
+    wall_stiffness: Optional[float] = spec(None, unit="N/m", gt=0,
+                                           doc="Stiffness of particle-wall contacts; default: "
+                                               "the particle stiffness.")
+    damping_ratio: Optional[float] = spec(0.3, ge=0, lt=1,
+                                          doc="Viscous damping ratio, normal and tangential "
+                                              "(PFC viscous damping 0.3 in the thesis).")
+    restitution: Optional[float] = spec(None, gt=0, le=1,
+                                        doc="Restitution coefficient; replaces damping_ratio "
+                                            "when given.")
+    friction: float = spec(0.9, ge=0, doc="Particle-particle friction coefficient (thesis 0.9).")
+    wall_friction: float = spec(0.6, ge=0, doc="Particle-wall friction coefficient (0.6).")
+    rolling_friction: float = spec(0.0, ge=0, doc="Rolling-resistance coefficient.")
+    dt: Optional[float] = spec(None, unit="s", gt=0,
+                               doc="Mechanical time step; default safety_factor x t_crit with "
+                                   "t_crit = 2 sqrt(m_min / k_n) (weigler eq. [2.1]); a larger "
+                                   "step than t_crit is refused.")
+    safety_factor: float = spec(0.2, gt=0, le=1, doc="dt = safety_factor x t_crit by default.")
+    skin: Optional[float] = spec(None, unit="m", gt=0,
+                                 doc="Neighbour-list skin; default half the largest diameter.")
+    precision: str = spec("float64", choices=("float32", "float64"),
+                          doc="Floating-point type of the mechanics; temperatures are always "
+                              "float64.")
+    thermal_substeps: int = spec(1, ge=1,
+                                 doc="Mechanical steps per thermal step; each contact's "
+                                     "conductance is weighted by the time it existed within "
+                                     "the thermal step.")
+    record_interval: Optional[float] = spec(None, unit="s", gt=0,
+                                            doc="Record the contact network (pairs with contact "
+                                                "durations) every record_interval into "
+                                                "contacts.npz, for motion model 'replay'.")
+    settle_time: float = spec(0.0, unit="s", ge=0,
+                              doc="Time the bed settles with the drum at rest before t = 0.")
+    gravity: float = spec(9.81, unit="m/s2", ge=0,
+                          doc="Gravity along -y. The thesis' 2D drum was tilted 45 degrees, "
+                              "which would give 9.81 sin 45 = 6.94 in the plane; the source does "
+                              "not say which it used (weigler-thermal-dem.md section 12.19).")
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """``[replay]``: thermal-only replay of a recorded contact network (motion 'replay')."""
+
+    file: str = spec(doc="contacts.npz written by a 'dem' run with dem.record_interval; "
+                         "relative to the scene file.")
+    cyclic: bool = spec(True, doc="Replay the recording over and over when the scene is longer "
+                                  "than it; at each restart the temperatures are carried over "
+                                  "to the particles whose start positions best match the end "
+                                  "positions.")
+
+
+@dataclass(frozen=True)
 class PackingConfig:
     """``[packing]``: how the initial packing is made and how contacts are found in it."""
 
-    method: str = spec("deposition", choices=("deposition", "file"),
+    method: str = spec("deposition", choices=("deposition", "pour", "file"),
                        doc="'deposition': particles dropped one by one at random positions roll "
-                           "down to a stable rest (drumheat.mechanics.deposition); 'file': "
-                           "positions from an .npz file.")
+                           "down to a stable rest (drumheat.mechanics.deposition, 2D); 'pour': "
+                           "inserted above the bed and settled by DEM under gravity "
+                           "(drumheat.mechanics.pour; needs [dem]); 'file': positions from an "
+                           ".npz file.")
     arrangement: str = spec("layers", choices=("layers", "mixed"),
                             doc="'layers': groups poured one after the other (first group at "
                                 "the bottom); 'mixed': pouring order shuffled.")
@@ -442,6 +511,8 @@ class Scene:
     heat: HeatConfig = spec(default_factory=HeatConfig, doc="Heat-transfer effects.")
     motion: MotionConfig = spec(default_factory=MotionConfig, doc="Motion model.")
     packing: PackingConfig = spec(default_factory=PackingConfig, doc="Initial packing.")
+    dem: Optional[DEMConfig] = spec(None, doc="DEM mechanics (motion model 'dem').")
+    replay: Optional[ReplayConfig] = spec(None, doc="Recorded contacts (motion model 'replay').")
     granulator: Optional[GranulatorConfig] = spec(None, doc="Granulator geometry and process "
                                                             "(motion model 'granulator').")
     source_path: Optional[str] = field(default=None, compare=False,
@@ -664,6 +735,18 @@ def _check_consistency(s: Scene) -> None:
         raise SceneError("gas.temperature", _MISSING_VALUE,
                          "[heat.loss] needs the gas temperature, in K", n)
     _check_new_effects(s)
+    if s.motion.model == "dem" and s.dem is None:
+        raise SceneError("dem", _MISSING_VALUE, "motion model 'dem' needs the [dem] table "
+                         "(its keys all have defaults: [dem] alone is enough)", n)
+    if s.motion.model == "replay" and s.replay is None:
+        raise SceneError("replay.file", _MISSING_VALUE, "motion model 'replay' needs "
+                         "[replay] file = a contacts.npz recorded by a 'dem' run", n)
+    if s.dem is not None and s.dem.restitution is not None and s.dem.damping_ratio not in (
+            None, 0.3):
+        raise SceneError("dem.restitution", s.dem.restitution, "give either dem.restitution or "
+                         "dem.damping_ratio, not both", n)
+    if s.packing.method == "pour" and s.dem is None:
+        raise SceneError("packing.method", "pour", "pouring runs the DEM; add the [dem] table", n)
     if s.motion.model == "random" and s.motion.t_R is None:
         raise SceneError("motion.t_R", _MISSING_VALUE, "model 'random' needs the re-mixing "
                          "period t_R, a number > 0 in s", n)
@@ -706,9 +789,10 @@ def _check_consistency(s: Scene) -> None:
     if s.packing.method == "file" and s.packing.file is None:
         raise SceneError("packing.file", _MISSING_VALUE, "method 'file' needs a path to an .npz "
                          "packing", n)
-    if s.motion.model in ("static", "random") and s.dim == 3 and s.packing.method != "file":
-        raise SceneError("dim", 3, "the static deposition packing is 2D; a 3D static bed needs "
-                         "packing.method = 'file'", n)
+    if (s.motion.model in DRUM_MOTION_MODELS and s.dim == 3
+            and s.packing.method == "deposition"):
+        raise SceneError("packing.method", "deposition", "the geometric deposition packing is "
+                         "2D; a 3D bed needs packing.method = 'pour' (with [dem]) or 'file'", n)
 
 
 def _check_new_effects(s: Scene) -> None:

@@ -56,7 +56,7 @@ def test_3d_glass_drum_slice_angle_of_repose():
     the real stiffness 10 revolutions would take 4e7 steps; at 2e3 N/m the overlap under the
     bed's weight is about 1 % of r)."""
     R, r, rpm = 0.125, 0.004, 9.55
-    L = 8 * r * 4 / 2  # 4 d
+    L = 4 * (2 * r)  # 4 d
     n = particles_for_filling_degree(0.35, R, r, dim=3, length=L)
     p = contact_params(2e3, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
     pk = pour(np.full(n, r), 2500.0, [DrumShell(R)], p, dim=3, periodic_length=L, seed=1)

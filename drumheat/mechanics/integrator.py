@@ -159,6 +159,17 @@ class Contacts(NamedTuple):
     wall_normal_force: jax.Array
 
 
+def pair_extra(extra):
+    """User per-pair data carried across neighbour rebuilds: ``extra["pair_data"]``.
+
+    If the ``extra`` state is a dict with a ``"pair_data"`` PyTree of arrays whose leading axis
+    runs over the neighbour pairs (aligned with ``nbrs.idx``), the integrator remaps it at every
+    rebuild and reallocation exactly like the tangential springs (pairs matched by identity,
+    new pairs start at zero). The coupled heat model keeps its contact-time accumulators there.
+    """
+    return extra.get("pair_data") if isinstance(extra, dict) else None
+
+
 def _chunk_diagnostics(state, lo, hi, periodic_axis):
     """Small reductions checked on the host after each chunk."""
     pos = state.position
@@ -285,8 +296,11 @@ class DEM:
             raise NeighborListError(
                 f"neighbour list still overflows after reallocation (pairs {count}, capacity "
                 f"{target}, cell capacity {new.cell_list_capacity})", state)
-        spring = remap_pair_data(state.nbrs.idx, state.pair_spring, new.idx, n)
-        return state._replace(nbrs=new, pair_spring=spring)
+        remap = lambda a: remap_pair_data(state.nbrs.idx, a, new.idx, n)  # noqa: E731
+        pdata = pair_extra(state.extra)
+        extra = state.extra if pdata is None else dict(
+            state.extra, pair_data=jax.tree_util.tree_map(remap, pdata))
+        return state._replace(nbrs=new, pair_spring=remap(state.pair_spring), extra=extra)
 
     def run(self, state: DEMState, n_steps: int, chunk: Optional[int] = None,
             callback: Optional[Callable] = None, max_reallocations: int = 8) -> DEMState:
@@ -631,13 +645,14 @@ def make_dem(
         return pos.at[:, -1].set(jnp.mod(pos[:, -1], periodic_length))
 
     def rebuild(args):
-        pos, nbrs, spring, count = args
+        pos, nbrs, spring, count, pdata = args
         new = neighbor.rebuild(pos, nbrs)
-        return new, remap_pair_data(nbrs.idx, spring, new.idx, n), count + 1
+        remap = lambda a: remap_pair_data(nbrs.idx, a, new.idx, n)  # noqa: E731
+        return new, remap(spring), count + 1, jax.tree_util.tree_map(remap, pdata)
 
     def keep(args):
-        pos, nbrs, spring, count = args
-        return nbrs, spring, count
+        pos, nbrs, spring, count, pdata = args
+        return nbrs, spring, count, pdata
 
     def step(state: DEMState):
         v = state.velocity + half * state.force * inv_m[:, None]
@@ -648,12 +663,15 @@ def make_dem(
             w = state.angular_velocity
         x = _wrap(state.position + dt * v)
         t = state.time + jnp.asarray(dt, time_dtype)
-        args = (x, state.nbrs, state.pair_spring, state.n_rebuilds)
+        extra = state.extra
+        args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
         if always_rebuild:
-            nbrs, spring, count = rebuild(args)
+            nbrs, spring, count, pdata = rebuild(args)
         else:
             need = neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
-            nbrs, spring, count = jax.lax.cond(need, rebuild, keep, args)
+            nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
+        if pdata is not None:
+            extra = dict(extra, pair_data=pdata)
         f, tq, spring, wspring, contacts, ovl = forces(x, v, w, t, nbrs, spring,
                                                        state.wall_spring)
         v = v + half * f * inv_m[:, None]
@@ -662,9 +680,9 @@ def make_dem(
         new = DEMState(position=x, velocity=v, angular_velocity=w, force=f, torque=tq, time=t,
                        step=state.step + 1, nbrs=nbrs, pair_spring=spring, wall_spring=wspring,
                        n_rebuilds=count, max_overlap=jnp.maximum(state.max_overlap, ovl),
-                       extra=state.extra)
+                       extra=extra)
         if extra_update is not None:
-            new = new._replace(extra=extra_update(state.extra, new, contacts, dt))
+            new = new._replace(extra=extra_update(new.extra, new, contacts, dt))
         return new, contacts
 
     def energies(state):
