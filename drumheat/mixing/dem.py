@@ -183,11 +183,12 @@ class DEMBed:
             raise SceneError("dem.record_interval", cfg.record_interval,
                              f"must divide run.output_interval = {out_iv:g} s into a whole "
                              "number of recording intervals", scene.name)
-        h_th = probe.dt * cfg.thermal_substeps
-        n_th = math.ceil(unit / h_th - 1e-9)
-        self.dt = unit / (n_th * cfg.thermal_substeps)
+        # dt does not depend on the thermal sub-cycling, so that variants with different
+        # thermal steps see the same mechanics; thermal steps run on across output times (an
+        # output shows the state after the last completed thermal step)
+        steps_per_unit = math.ceil(unit / probe.dt - 1e-9)
+        self.dt = unit / steps_per_unit
         self.substeps = cfg.thermal_substeps
-        steps_per_unit = n_th * cfg.thermal_substeps
         self.steps_per_output = steps_per_unit * int(round(ratio))
         self.steps_per_record = steps_per_unit if cfg.record_interval is not None else None
         self._packing = None
