@@ -453,6 +453,12 @@ class DEMConfig:
                                             doc="Record the contact network (pairs with contact "
                                                 "durations) every record_interval into "
                                                 "contacts.npz, for motion model 'replay'.")
+    replay_after: Optional[float] = spec(None, unit="s", gt=0,
+                                         doc="Simulate mechanics and heat together only up to "
+                                             "this time, then continue by cyclic replay of the "
+                                             "contacts recorded so far (motion model 'replay', "
+                                             "needs record_interval): hours of process time "
+                                             "from a few revolutions of DEM.")
     settle_time: float = spec(0.0, unit="s", ge=0,
                               doc="Time the bed settles with the drum at rest before t = 0.")
     gravity: float = spec(9.81, unit="m/s2", ge=0,
@@ -745,6 +751,14 @@ def _check_consistency(s: Scene) -> None:
             None, 0.3):
         raise SceneError("dem.restitution", s.dem.restitution, "give either dem.restitution or "
                          "dem.damping_ratio, not both", n)
+    if s.dem is not None and s.dem.replay_after is not None:
+        if s.dem.record_interval is None:
+            raise SceneError("dem.replay_after", s.dem.replay_after, "needs dem.record_interval "
+                             "(the contacts to replay)", n)
+        k = s.dem.replay_after / s.run.output_interval
+        if abs(k - round(k)) > 1e-6 or round(k) < 1:
+            raise SceneError("dem.replay_after", s.dem.replay_after, "must be a positive "
+                             f"multiple of run.output_interval = {s.run.output_interval:g} s", n)
     if s.packing.method == "pour" and s.dem is None:
         raise SceneError("packing.method", "pour", "pouring runs the DEM; add the [dem] table", n)
     if s.motion.model == "random" and s.motion.t_R is None:

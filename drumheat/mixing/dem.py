@@ -248,8 +248,11 @@ class DEMBed:
             rec.positions.append(np.asarray(pos0))
         wall_count_time = 0.0
         chunk = self.steps_per_record or self.steps_per_output
+        replay_after = self.scene.dem.replay_after
+        n_coupled = len(self.t_out) - 1 if replay_after is None else min(
+            len(self.t_out) - 1, int(round(replay_after / self.scene.run.output_interval)))
         with SimProgress(self.scene.run.duration, progress) as bar:
-            for t_end in self.t_out[1:]:
+            for t_end in self.t_out[1:n_coupled + 1]:
                 pair_acc = wall_acc = 0.0
                 done = 0
                 while done < self.steps_per_output:
@@ -261,9 +264,8 @@ class DEMBed:
                     done += chunk
                     ex = jax.device_get(state.extra)
                     pair_acc += float(np.sum(ex["pair_data"]["rec_time"]))
-                    wall_acc += float(np.sum(ex["rec_wall_time"] * np.tile(
-                        self.wall_heated, self.n) if self.wall_heated.any() else
-                        ex["rec_wall_time"]))
+                    wall_acc += float(np.sum(ex["rec_wall_time"] * np.tile(self.wall_heated,
+                                                                           self.n)))
                     if rec is not None:
                         rec.add(np.asarray(state.nbrs.idx), ex, np.asarray(state.position))
                 span = self.steps_per_output * self.dt
@@ -274,6 +276,22 @@ class DEMBed:
                 out["n_pairs"].append(pair_acc / span)
                 out["n_wall"].append(wall_acc / span)
                 bar.update_to(t_end)
+            n_rest = len(self.t_out) - 1 - n_coupled
+            if n_rest > 0:  # cyclic replay of what was recorded
+                from drumheat.mixing.replay import Recording
+
+                recording = Recording(rec.arrays(self))
+                per_out = self.steps_per_output // self.steps_per_record
+                g0 = recording.n_intervals  # the first step restarts the cycle
+                Ts, Qs, _ = recording.integrate(model, state.extra["T"], state.extra["Q"], g0,
+                                                per_out, n_rest, bar, float(self.t_out[n_coupled]))
+                for m, (T, Q) in enumerate(zip(Ts, Qs)):
+                    out["T"].append(np.asarray(T))
+                    out["pos"].append(recording.position_at(g0 + (m + 1) * per_out))
+                    for a in model.accounts:
+                        out["Q"][a].append(float(Q[a]))
+                    out["n_pairs"].append(recording.mean_pairs)
+                    out["n_wall"].append(recording.mean_wall)
         self.recording = rec
         n_pairs = np.array([out["n_pairs"][0]] + out["n_pairs"])
         n_wall = np.array([out["n_wall"][0]] + out["n_wall"])
@@ -371,10 +389,11 @@ class _Recorder:
         self.wall_ptr.append(self.wall_ptr[-1] + len(nz))
         self.positions.append(position)
 
-    def save(self, path, bed: DEMBed):
+    def arrays(self, bed: DEMBed) -> dict:
+        """The recording as arrays (the content of ``contacts.npz``)."""
         cat = lambda xs, dt: np.concatenate(xs).astype(dt) if xs else np.zeros(0, dt)  # noqa
-        np.savez_compressed(
-            path, interval=self.interval, n_particles=self.n, n_walls=self.n_walls,
+        return dict(
+            interval=self.interval, n_particles=self.n, n_walls=self.n_walls,
             pair_i=cat(self.pair_i, np.int32), pair_j=cat(self.pair_j, np.int32),
             pair_duration=cat(self.pair_dur, np.float64),
             pair_ptr=np.asarray(self.pair_ptr, np.int64),
@@ -383,3 +402,6 @@ class _Recorder:
             wall_ptr=np.asarray(self.wall_ptr, np.int64),
             wall_heated=bed.wall_heated, diameter=bed.diameter, group=bed.group,
             positions=np.stack(self.positions).astype(np.float32), scene=bed.scene.to_toml())
+
+    def save(self, path, bed: DEMBed):
+        np.savez_compressed(path, **self.arrays(bed))

@@ -65,6 +65,78 @@ def restart_assignment(end_pos, start_pos, group) -> np.ndarray:
     return match
 
 
+class Recording:
+    """A recorded contact network as padded device arrays (one row per recording interval).
+
+    Parameters
+    ----------
+    rec : dict
+        The arrays of ``contacts.npz`` (see :class:`drumheat.mixing.dem.DEMBed`): ``interval``,
+        ``n_particles``, ``pair_ptr/pair_i/pair_j/pair_duration``, ``wall_ptr/wall_particle/
+        wall_index/wall_duration``, ``wall_heated``, ``positions`` (K + 1, N, dim), ``group``.
+    """
+
+    def __init__(self, rec: dict):
+        self.tau = float(rec["interval"])
+        self.n_intervals = len(rec["pair_ptr"]) - 1
+        self.n = int(rec["n_particles"])
+        i, j, w = _pad_csr(rec["pair_ptr"], (rec["pair_i"], rec["pair_j"],
+                                             rec["pair_duration"] / self.tau), (0, 0, 0.0), None)
+        heated = np.asarray(rec["wall_heated"], float)[rec["wall_index"]]
+        wp, ww = _pad_csr(rec["wall_ptr"], (rec["wall_particle"],
+                                            rec["wall_duration"] / self.tau * heated), (0, 0.0),
+                          None)
+        self.pairs = (jnp.asarray(i, jnp.int32), jnp.asarray(j, jnp.int32), jnp.asarray(w, float))
+        self.walls = (jnp.asarray(wp, jnp.int32), jnp.asarray(ww, float))
+        self.positions = np.asarray(rec["positions"], float)
+        self.span = self.tau * self.n_intervals
+        self.mean_pairs = float(np.sum(rec["pair_duration"])) / self.span
+        self.mean_wall = float(np.sum(rec["wall_duration"] * heated)) / self.span
+        self.match = restart_assignment(self.positions[-1], self.positions[0],
+                                        np.asarray(rec["group"]))
+
+    def network(self, k) -> ContactNetwork:
+        """Contact network of interval ``k`` (weights = contact-time fractions)."""
+        i, j, w = (a[k] for a in self.pairs)
+        wp, ww = (a[k] for a in self.walls)
+        return ContactNetwork(i, j, w, wp, jnp.zeros_like(wp), ww)
+
+    def integrate(self, model, T0, Q0, g0: int, steps_per_output: int, n_outputs: int,
+                  progress: SimProgress | None = None, t0: float = 0.0):
+        """Explicit steps of one recording interval each, cyclically from interval ``g0``.
+
+        Returns the states ``(T, Q)`` at the ``n_outputs`` output times after the start
+        (``steps_per_output`` intervals apart) and the interval counter at the end. A step whose
+        counter is a positive multiple of the number of intervals first carries the
+        temperatures over to the restart positions (:func:`restart_assignment`).
+        """
+        K, tau = self.n_intervals, self.tau
+        match = jnp.asarray(self.match)
+        C = model.particles.capacity
+
+        def step(carry, _):
+            T, Q, g = carry
+            k = g % K
+            T = jnp.where((k == 0) & (g > 0), T[match], T)
+            q, ext = model.heat_flows(T, self.network(k))
+            return (T + tau * q / C, {a: Q[a] + tau * ext[a] for a in Q}, g + 1), None
+
+        advance = jax.jit(lambda c: jax.lax.scan(step, c, None, length=steps_per_output)[0])
+        carry = (jnp.asarray(T0, float), Q0, jnp.asarray(g0, jnp.int64))
+        Ts, Qs = [], []
+        for m in range(n_outputs):
+            carry = advance(carry)
+            Ts.append(carry[0])
+            Qs.append(carry[1])
+            if progress is not None:
+                progress.update_to(t0 + (m + 1) * steps_per_output * tau)
+        return Ts, Qs, int(carry[2])
+
+    def position_at(self, g: int) -> np.ndarray:
+        """Positions at the start of (cyclic) interval ``g``."""
+        return self.positions[g % self.n_intervals]
+
+
 class ReplayBed(StaticBed):
     """Thermal-only replay of a recorded contact network (see the module docstring)."""
 
@@ -77,80 +149,38 @@ class ReplayBed(StaticBed):
             raise SceneError("replay.file", scene.replay.file, "no such recording (write one "
                              "with a 'dem' run and dem.record_interval)", scene.name)
         with np.load(path) as f:
-            rec = {k: f[k] for k in f.files}
+            raw = {k: f[k] for k in f.files}
         self.group = group_index(scene)
         n = len(self.group)
-        if int(rec["n_particles"]) != n:
-            raise SceneError("replay.file", scene.replay.file, f"holds {int(rec['n_particles'])}"
+        if int(raw["n_particles"]) != n:
+            raise SceneError("replay.file", scene.replay.file, f"holds {int(raw['n_particles'])}"
                              f" particles; the scene has {n}", scene.name)
-        self.tau = float(rec["interval"])
-        self.n_intervals = len(rec["pair_ptr"]) - 1
-        span = self.tau * self.n_intervals
+        raw["group"] = self.group
+        self.rec = rec = Recording(raw)
+        self.diameter = raw["diameter"]
         self.t_out = output_times(scene)
-        self.steps_per_output = int(round(scene.run.output_interval / self.tau))
-        if abs(self.steps_per_output * self.tau - scene.run.output_interval) > 1e-9 * self.tau:
+        self.steps_per_output = int(round(scene.run.output_interval / rec.tau))
+        if abs(self.steps_per_output * rec.tau - scene.run.output_interval) > 1e-9 * rec.tau:
             raise SceneError("run.output_interval", scene.run.output_interval,
-                             f"must be a multiple of the recording interval {self.tau:g} s",
+                             f"must be a multiple of the recording interval {rec.tau:g} s",
                              scene.name)
         if len(self.t_out) > 1 and abs(self.t_out[-1] - self.t_out[-2]
                                        - scene.run.output_interval) > 1e-9:
             raise SceneError("run.duration", scene.run.duration, "must be a multiple of "
                              "run.output_interval for a replay", scene.name)
-        if scene.run.duration > span * (1 + 1e-12) and not scene.replay.cyclic:
+        if scene.run.duration > rec.span * (1 + 1e-12) and not scene.replay.cyclic:
             raise SceneError("run.duration", scene.run.duration, f"exceeds the recording "
-                             f"({span:g} s); set replay.cyclic = true or shorten the run",
+                             f"({rec.span:g} s); set replay.cyclic = true or shorten the run",
                              scene.name)
-        i, j, w = _pad_csr(rec["pair_ptr"], (rec["pair_i"], rec["pair_j"],
-                                             rec["pair_duration"] / self.tau), (0, 0, 0.0), None)
-        heated = rec["wall_heated"].astype(float)[rec["wall_index"]]
-        wp, ww = _pad_csr(rec["wall_ptr"], (rec["wall_particle"],
-                                            rec["wall_duration"] / self.tau * heated), (0, 0.0),
-                          None)
-        self.pairs = (jnp.asarray(i, jnp.int32), jnp.asarray(j, jnp.int32), jnp.asarray(w, float))
-        self.walls = (jnp.asarray(wp, jnp.int32), jnp.asarray(ww, float))
-        self.positions = rec["positions"].astype(float)
-        self.diameter = rec["diameter"]
-        self.match = restart_assignment(self.positions[-1], self.positions[0], self.group)
-        self.mean_pairs = float(np.sum(rec["pair_duration"])) / span
-        self.mean_wall = float(np.sum(rec["wall_duration"] * heated)) / span if heated.size \
-            else 0.0
-        self.recording = rec
-
-    def _interval_network(self, k) -> ContactNetwork:
-        i, j, w = (a[k] for a in self.pairs)
-        wp, ww = (a[k] for a in self.walls)
-        return ContactNetwork(i, j, w, wp, jnp.zeros_like(wp), ww)
 
     def solve(self, params=None, progress: SimProgress | None = None):
         """Temperatures ``(n_out, N)`` and exchanged heat ``{account: (n_out,)}``;
         differentiable with respect to ``params``."""
         model, T0 = self.model(params)
-        K, tau = self.n_intervals, self.tau
-        match = jnp.asarray(self.match)
-        C = model.particles.capacity
-
-        def step(carry, _):
-            T, Q, g = carry
-            k = g % K
-            T = jnp.where((k == 0) & (g > 0), T[match], T)
-            q, ext = model.heat_flows(T, self._interval_network(k))
-            T = T + tau * q / C
-            Q = {a: Q[a] + tau * ext[a] for a in Q}
-            return (T, Q, g + 1), None
-
-        @jax.jit
-        def advance(carry):
-            return jax.lax.scan(step, carry, None, length=self.steps_per_output)[0]
-
-        carry = (jnp.asarray(T0, float), {a: jnp.zeros(()) for a in model.accounts},
-                 jnp.asarray(0, jnp.int64))
-        Ts, Qs = [carry[0]], [carry[1]]
-        for t_end in self.t_out[1:]:
-            carry = advance(carry)
-            Ts.append(carry[0])
-            Qs.append(carry[1])
-            if progress is not None:
-                progress.update_to(t_end)
+        Q0 = {a: jnp.zeros(()) for a in model.accounts}
+        Ts, Qs, _ = self.rec.integrate(model, T0, Q0, 0, self.steps_per_output,
+                                       len(self.t_out) - 1, progress)
+        Ts, Qs = [jnp.asarray(T0, float)] + Ts, [Q0] + Qs
         return jnp.stack(Ts), {a: jnp.stack([q[a] for q in Qs]) for a in model.accounts}
 
     def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
@@ -158,12 +188,12 @@ class ReplayBed(StaticBed):
         with SimProgress(self.scene.run.duration, progress) as bar:
             T, Q = self.solve(params, bar)
         n_out = len(self.t_out)
-        steps = np.arange(n_out) * self.steps_per_output % self.n_intervals
+        rec = self.rec
         d2 = float(np.mean(self.diameter**2))
         return Trajectory(
             t=self.t_out, T=np.asarray(T), Q={k: np.asarray(v) for k, v in Q.items()},
-            position=self.positions[steps], diameter=self.diameter,
-            mass=np.asarray(model.particles.mass), capacity=np.asarray(model.particles.capacity),
-            group=self.group, n_contacts=np.full(n_out, self.mean_pairs),
-            n_wall_contacts=np.full(n_out, self.mean_wall),
-            wall_area=np.full(n_out, d2 * self.mean_wall))
+            position=np.stack([rec.position_at(m * self.steps_per_output) for m in range(n_out)]),
+            diameter=self.diameter, mass=np.asarray(model.particles.mass),
+            capacity=np.asarray(model.particles.capacity), group=self.group,
+            n_contacts=np.full(n_out, rec.mean_pairs), n_wall_contacts=np.full(n_out, rec.mean_wall),
+            wall_area=np.full(n_out, d2 * rec.mean_wall))

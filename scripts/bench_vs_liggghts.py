@@ -1,0 +1,273 @@
+"""drumheat vs LIGGGHTS side by side: the 3D rotating-drum slice of shared/peers/liggghts.
+
+Scene (peers/liggghts/README.md): glass spheres d = 8 mm, rho = 2500 kg/m^3, drum D = 0.25 m
+turning at 9.55 rpm about z, periodic axis (no end walls) of length L = N Vp / (0.35 0.6 pi R^2)
+(35 % nominal fill), gravity -y; LIGGGHTS ``hooke`` with tangential history:
+k_n = k_t = 1.001e5 N/m (particle-particle), 1.517e5 N/m (particle-wall), e = 0.5
+(gamma = sqrt(4 m* k / (1 + (pi/ln e)^2)), i.e. drumheat's ``restitution_model="linear"``),
+mu = 0.5, dt = 1e-5 s, skin 0.5 d = 4 mm; contact conduction on (k = 1 W/m/K, c = 836 J/kg/K,
+LIGGGHTS ``heat/gran/conduction`` with the default overlap contact area).
+
+Procedure for each N:
+
+1. Packing (not timed, LIGGGHTS is much the quicker code for this): the peers folder's input
+   files are copied to a scratch directory (``--workdir``); ``in.prep`` inserts N particles into
+   the rotating drum and lets them fall and settle for 0.8 s, ``in.spinup`` rotates 0.7 s more
+   and writes a restart and a data file (N = 50000: the N = 10000 state tiled 5x along z,
+   ``replicate_z.py``, + 0.2 s). Existing restarts in the work directory are reused.
+2. LIGGGHTS: ``in.bench`` reads the restart, runs ``nwarm`` steps, then ``steps`` timed steps
+   (its ``Loop time``), on 1 and 2 MPI ranks.
+3. drumheat: the same state read from the data file (positions, velocities, spins; the
+   tangential springs start at zero, the warm-up rebuilds them), float32 mechanics, float64
+   temperatures updated in the same jitted loop (``extra_update``) by the LIGGGHTS conduction
+   law ``q_ij = 4 k_i k_j / (k_i + k_j) sqrt(A_c) (T_j - T_i)`` with the overlap-circle area
+   A_c; ``nwarm`` steps (compilation included) then ``steps`` timed steps via
+   :meth:`DEM.run` (chunked, with the overflow / NaN / escape checks).
+
+Output: a table N x code x ranks with particle-steps/s and the ratio to drumheat (and the
+machine load seen before each timing; the machine has 2 shared cores, so compare only rows
+measured at low load). drumheat runs on whatever JAX device is default (CPU here: it uses
+both cores through XLA's intra-op threads, so its fair LIGGGHTS partner is the 2-rank run).
+
+Usage: python scripts/bench_vs_liggghts.py [--n 2000 10000 50000] [--steps S] [--quick]
+       [--ranks 1 2] [--workdir DIR] [--no-liggghts] [--thermal on|off]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import drumheat  # noqa: F401  (x64 for the temperatures)
+from drumheat.geometry import DrumShell
+from drumheat.mechanics import contact_params, make_dem, make_particles
+
+PEERS = Path(__file__).resolve().parents[1].parent / "shared" / "peers" / "liggghts"
+if not PEERS.exists():  # a checkout elsewhere
+    PEERS = Path("/work/shared/peers/liggghts")
+
+R_DRUM, D_P, RHO = 0.125, 0.008, 2500.0
+RPM, DT, SKIN = 9.55, 1e-5, 0.004
+KN_PP, KN_PW, E_REST, MU = 1.001e5, 1.517e5, 0.5, 0.5
+K_COND, C_P, T0 = 1.0, 836.0, 293.0
+LENGTH = {2000: 0.052, 10000: 0.26, 50000: 1.30}
+# timed / warm-up steps (the peers' choice is 50000/2000, 10000/500, 2000/200)
+DEFAULT_STEPS = {2000: (20000, 1000), 10000: (5000, 500), 50000: (1000, 200)}
+PREP_TIMEOUT = 300  # s per LIGGGHTS call
+
+
+def mpirun(np_):
+    cmd = ["mpirun"]
+    if os.geteuid() == 0:
+        cmd.append("--allow-run-as-root")
+    return cmd + ["-np", str(np_), "liggghts", "-echo", "none", "-nocite"]
+
+
+def load():
+    return os.getloadavg()[0]
+
+
+def run_liggghts(args, cwd, log, np_=1, timeout=PREP_TIMEOUT):
+    cmd = mpirun(np_) + args + ["-log", log]
+    with open(Path(cwd) / (log + ".screen"), "w") as scr:
+        subprocess.run(cmd, cwd=cwd, stdout=scr, stderr=subprocess.STDOUT, check=True,
+                       timeout=timeout)
+
+
+def prepare(n, work, np_prep):
+    """Settled, rotating drum of n particles: restart/drum_N{n}.restart and .data."""
+    rst = work / f"restart/drum_N{n}.restart"
+    dat = work / f"restart/drum_N{n}.data"
+    if rst.exists() and dat.exists():
+        return rst, dat
+    (work / "restart").mkdir(exist_ok=True)
+    (work / "logs").mkdir(exist_ok=True)
+    t0 = time.perf_counter()
+    if n == 50000:
+        prepare(10000, work, np_prep)
+        subprocess.run(["python3", "replicate_z.py", "restart/drum_N10000.data",
+                        "restart/rep_N50000.data", "5", "1e-6", "12345"], cwd=work, check=True)
+        run_liggghts(["-in", "in.fromdata", "-var", "data_in", "restart/rep_N50000.data",
+                      "-var", "nrun", "10000", "-var", "out", "restart/tmp_N50000.restart",
+                      "-var", "data", "restart/tmp_N50000.data"], work,
+                     "logs/fromdata_N50000.log", np_prep)
+        src = "restart/tmp_N50000.restart"
+        nrun = 10000
+    else:
+        L = LENGTH.get(n) or n * math.pi / 6 * D_P**3 / (0.35 * 0.6 * math.pi * R_DRUM**2)
+        run_liggghts(["-in", "in.prep", "-var", "N", str(n), "-var", "L", f"{L:.6g}",
+                      "-var", "nprep", "80000", "-var", "out", f"restart/prep_N{n}.restart"],
+                     work, f"logs/prep_N{n}.log", np_prep)
+        src = f"restart/prep_N{n}.restart"
+        nrun = 70000
+    run_liggghts(["-in", "in.spinup", "-var", "in", src, "-var", "nrun", str(nrun),
+                  "-var", "out", str(rst.relative_to(work)), "-var", "data",
+                  str(dat.relative_to(work))], work, f"logs/spinup_N{n}.log", np_prep)
+    print(f"  prepared N = {n} with LIGGGHTS in {time.perf_counter() - t0:.0f} s", flush=True)
+    return rst, dat
+
+
+def read_data(path):
+    """Positions, velocities, spins, radii and z period of a LIGGGHTS write_data file."""
+    lines = Path(path).read_text().splitlines()
+    zlo, zhi = [float(v) for v in [ln for ln in lines if ln.endswith("zlo zhi")][0].split()[:2]]
+    ia = next(k for k, ln in enumerate(lines) if ln.startswith("Atoms"))
+    iv = next(k for k, ln in enumerate(lines) if ln.startswith("Velocities"))
+    A = np.array([[float(v) for v in ln.split()[:7]] for ln in lines[ia + 2:iv] if ln.strip()])
+    V = np.array([[float(v) for v in ln.split()[:7]] for ln in lines[iv + 2:] if ln.strip()])
+    A = A[np.argsort(A[:, 0])]
+    V = V[np.argsort(V[:, 0])]
+    pos = A[:, 4:7].copy()
+    pos[:, 2] -= zlo
+    return pos, V[:, 1:4], V[:, 4:7], 0.5 * A[:, 2], zhi - zlo
+
+
+def conduction(n, radius, mc):
+    """LIGGGHTS heat/gran/conduction (overlap area) as a drumheat ``extra_update``; T float64."""
+    hk = 4 * K_COND * K_COND / (2 * K_COND)
+    r = jnp.asarray(radius, jnp.float64)
+
+    def update(T, state, c, dt):
+        i = jnp.where(c.pair_mask, c.pair_i, 0)
+        j = jnp.where(c.pair_mask, c.pair_j, 0)
+        L = c.pair_distance.astype(jnp.float64)
+        ri, rj = r[i], r[j]
+        Ls = jnp.where(c.pair_mask, L, 1.0)
+        area = -math.pi / 4 * ((Ls - ri - rj) * (Ls + ri - rj) * (Ls - ri + rj)
+                               * (Ls + ri + rj)) / (Ls * Ls)
+        hc = hk * jnp.sqrt(jnp.maximum(area, 0.0))
+        q = jnp.where(c.pair_mask, hc * (T[j] - T[i]), 0.0)
+        dq = (jax.ops.segment_sum(q, c.pair_i, n, indices_are_sorted=True)
+              - jax.ops.segment_sum(q, c.pair_j, n))
+        return T + dt * dq / mc
+
+    return update
+
+
+def drumheat_setup(dat, thermal):
+    pos, vel, omega, radius, L = read_data(dat)
+    n = len(pos)
+    part = make_particles(radius, RHO)
+    params = contact_params(KN_PP, kn_wall=KN_PW, restitution=E_REST, restitution_model="linear",
+                            friction=MU, wall_friction=MU)
+    mc = jnp.asarray(np.asarray(part.mass) * C_P)
+    upd = conduction(n, radius, mc) if thermal else None
+    dem = make_dem(part, [DrumShell(R_DRUM, rpm=RPM)], params, dim=3, periodic_length=L, dt=DT,
+                   skin=SKIN, dtype=jnp.float32, extra_update=upd)
+    T = None
+    if thermal:  # a temperature gradient across the bed so that heat actually flows
+        T = jnp.asarray(T0 + 50.0 * (pos[:, 0] - pos[:, 0].min()) / np.ptp(pos[:, 0]),
+                        jnp.float64)
+    state = dem.init(pos, velocity=vel, angular_velocity=omega, extra=T)
+    return dem, state
+
+
+def time_drumheat(dat, steps, warm, thermal):
+    dem, state = drumheat_setup(dat, thermal)
+    n = dem.particles.n
+    t0 = time.perf_counter()
+    state = dem.run(state, warm, chunk=warm)  # compiles; builds the tangential history
+    jax.block_until_ready(state.position)
+    t_warm = time.perf_counter() - t0
+    ld = load()
+    r0 = int(state.n_rebuilds)
+    t0 = time.perf_counter()
+    out = dem.run(state, steps, chunk=steps)
+    jax.block_until_ready(out.position)
+    wall = time.perf_counter() - t0
+    extra = ""
+    if thermal:
+        e = float(jnp.sum(out.extra * dem.particles.mass * C_P)
+                  - jnp.sum(state.extra * dem.particles.mass * C_P))
+        extra = f"heat balance drift {e:.2e} J"
+    return dict(rate=n * steps / wall, wall=wall, load=ld, warm_s=t_warm,
+                rebuilds=int(out.n_rebuilds) - r0, note=extra)
+
+
+def time_liggghts(rst, work, n, steps, warm, ranks, thermal):
+    log = f"logs/bench_N{n}_np{ranks}_{thermal}.log"
+    ld = load()
+    run_liggghts(["-in", "in.bench", "-var", "in", str(rst.relative_to(work)), "-var", "nwarm",
+                  str(warm), "-var", "nsteps", str(steps), "-var", "thermal", thermal], work,
+                 log, ranks)
+    txt = (work / log).read_text()
+    loops = re.findall(r"^Loop time of ([0-9.eE+-]+) on (\d+) procs for (\d+) steps with (\d+)",
+                       txt, re.M)
+    t, p, s, na = loops[-1]
+    t, s, na = float(t), int(s), int(na)
+    if na != n:
+        print(f"  warning: LIGGGHTS has {na} atoms (expected {n})")
+    return dict(rate=na * s / t, wall=t, load=ld, note="")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[2000, 10000])
+    ap.add_argument("--steps", type=int, default=None, help="timed steps (both codes)")
+    ap.add_argument("--warm", type=int, default=None, help="warm-up steps (both codes)")
+    ap.add_argument("--quick", action="store_true", help="N = 2000 only, 3000 timed steps")
+    ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--thermal", default="on", choices=["on", "off"])
+    ap.add_argument("--workdir", default="/tmp/drumheat_vs_liggghts")
+    ap.add_argument("--prep-ranks", type=int, default=2)
+    ap.add_argument("--no-liggghts", action="store_true", help="time drumheat only")
+    args = ap.parse_args()
+    sizes = [2000] if args.quick else args.n
+    have_lig = shutil.which("liggghts") is not None and shutil.which("mpirun") is not None
+    if not have_lig:
+        print("LIGGGHTS not installed (apt-get install liggghts): drumheat only, and only with "
+              "packings already in the work directory")
+    work = Path(args.workdir)
+    work.mkdir(parents=True, exist_ok=True)
+    for f in PEERS.iterdir():
+        if f.is_file() and (f.name.startswith("in.") or f.suffix in (".py", ".sh")):
+            shutil.copy(f, work / f.name)
+    thermal = args.thermal == "on"
+    print(f"jax {jax.__version__} on {jax.devices()[0].platform}; drumheat float32 mechanics, "
+          f"float64 temperatures; heat conduction {args.thermal}; {os.cpu_count()} CPUs")
+    rows = []
+    for n in sizes:
+        steps, warm = DEFAULT_STEPS.get(n, (max(1000, 2 * 10**7 // n), 500))
+        if args.quick:
+            steps, warm = 3000, 500
+        steps = args.steps or steps
+        warm = args.warm or warm
+        if have_lig:
+            rst, dat = prepare(n, work, args.prep_ranks)
+        else:
+            rst, dat = None, work / f"restart/drum_N{n}.data"
+            if not dat.exists():
+                print(f"  no packing for N = {n} in {work}; skipped")
+                continue
+        r = time_drumheat(dat, steps, warm, thermal)
+        rows.append((n, "drumheat", "-", steps, r))
+        print(f"  N={n} drumheat: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
+              f"{r['load']:.2f}, rebuilds {r['rebuilds']}) {r['note']}", flush=True)
+        if have_lig and not args.no_liggghts:
+            for k in args.ranks:
+                r = time_liggghts(rst, work, n, steps, warm, k, args.thermal)
+                rows.append((n, "LIGGGHTS", str(k), steps, r))
+                print(f"  N={n} LIGGGHTS {k} rank(s): {r['rate']:.3g} p-steps/s "
+                      f"({r['wall']:.1f} s, load {r['load']:.2f})", flush=True)
+    print()
+    print("| N | code | ranks | timed steps | wall s | particle-steps/s | rate / drumheat "
+          "| load before |")
+    print("|---|---|---|---|---|---|---|---|")
+    for n, code, ranks, steps, r in rows:
+        ref = next(x[4]["rate"] for x in rows if x[0] == n and x[1] == "drumheat")
+        print(f"| {n} | {code} | {ranks} | {steps} | {r['wall']:.2f} | {r['rate']:.3g} | "
+              f"{r['rate'] / ref:.2f} | {r['load']:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
