@@ -121,3 +121,25 @@ def test_cyclic_replay_and_interfraction_contacts(tmp_path):
     assert rep.summary["energy_balance_rel_error"] < 1e-12
     ts = rep.timeseries
     assert np.all(np.diff(ts["T_mean:cold"]) > 0) and np.all(np.diff(ts["T_mean:warm"]) < 0)
+
+
+def test_replay_after_continues_the_coupled_run_cyclically():
+    scene = dem_scene(**{"run.duration": 0.6, "run.output_interval": 0.1,
+                         "dem.record_interval": 0.01, "dem.replay_after": 0.2})
+    res = dh.run(scene, progress=False)
+    full = dh.run(scene.with_overrides({"dem.replay_after": 0.6}), progress=False)
+    # identical while coupled, then close: the replay repeats the first 0.2 s of contacts
+    np.testing.assert_array_equal(res.T[:3], full.T[:3])
+    dev = np.max(np.abs(res.timeseries["T_mean:cold"] - full.timeseries["T_mean:cold"]))
+    gain = full.timeseries["T_mean:cold"].iloc[-1] - full.timeseries["T_mean:cold"].iloc[0]
+    assert 0 < dev < 0.5 * gain
+    assert res.summary["energy_balance_rel_error"] < 1e-12
+    assert np.isnan(res.timeseries["interfraction_contacts"].iloc[-1])
+
+
+def test_builtin_dem_scenes_load_and_build():
+    for name in ("weigler-mixed", "weigler-glass-drum-9.55", "weigler-glass-drum-47.75",
+                 "weigler-glass-mixing-9.55", "weigler-glass-mixing-47.75"):
+        bed = make_motion(load_scene(name))
+        assert bed.dt <= 0.2 * bed.t_crit * (1 + 1e-9)
+        assert bed.steps_per_output * bed.dt == pytest.approx(bed.scene.run.output_interval)

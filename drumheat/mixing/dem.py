@@ -305,7 +305,9 @@ class DEMBed:
             position=positions, diameter=self.diameter, mass=np.asarray(model.particles.mass),
             capacity=np.asarray(model.particles.capacity), group=self.group,
             n_contacts=n_pairs, n_wall_contacts=n_wall, wall_area=d2 * cum_wall,
-            extra={"interfraction_contacts": self._interfraction(positions)}
+            extra={"interfraction_contacts": np.concatenate([
+                self._interfraction(positions[:n_coupled + 1]),
+                np.full(len(positions) - n_coupled - 1, np.nan)])}  # not moving in a replay
             if len(self.scene.groups) == 2 else {},
             files={"contacts.npz": lambda path: rec.save(path, self)} if rec is not None else {})
 
