@@ -54,7 +54,8 @@ def _cmd_animate(args) -> int:
     from drumheat.animate import AnimationError, animate
 
     try:
-        out = animate(args.result_dir, out=args.out, fps=args.fps, fmt=args.format)
+        out = animate(args.result_dir, out=args.out, fps=args.fps, fmt=args.format,
+                      every=args.every)
     except AnimationError as err:
         return _fail(str(err))
     print(f"animation in {out}")
@@ -95,6 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--out", help="output file (default RESULT_DIR/animation.gif); a .mp4 "
                                  "name writes MP4 (needs imageio-ffmpeg)")
     a.add_argument("--fps", type=float, default=10.0, help="frames per second (default 10)")
+    a.add_argument("--every", type=int, default=1, help="use every k-th output (default 1)")
     a.add_argument("--format", choices=("gif", "mp4"), default=None,
                    help="file format (default: from the --out suffix, else gif)")
     a.set_defaults(func=_cmd_animate)

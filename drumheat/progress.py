@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import sys
 
-from tqdm.auto import tqdm
-
 
 class SimProgress:
     """Context manager: ``with SimProgress(duration, enabled) as p: p.update_to(t)``.
@@ -23,6 +21,11 @@ class SimProgress:
 
     def __enter__(self):
         if self.enabled:
+            try:  # a notebook widget bar if ipywidgets is there, else the text bar
+                import ipywidgets  # noqa: F401
+                from tqdm.auto import tqdm
+            except ImportError:
+                from tqdm.std import tqdm
             self.bar = tqdm(total=self.duration, desc=self.desc, unit="s", delay=self.delay,
                             file=sys.stderr, dynamic_ncols=True,
                             bar_format="{desc}: {percentage:3.0f}%|{bar}| t = {n:.4g} / "

@@ -685,17 +685,24 @@ def _set_path(raw: dict, key: str, value: Any, scene_name=None) -> None:
     if isinstance(obj, list):
         if not last.isdigit() or int(last) >= len(obj):
             raise SceneError(key, last, f"index must be 0..{len(obj) - 1}", scene_name)
+        if value is None:
+            raise SceneError(key, None, "a group cannot be removed by an override", scene_name)
         obj[int(last)] = value
+    elif value is None:
+        obj.pop(last, None)
     else:
         obj[last] = value
 
 
 def parse_override(text: str) -> tuple[str, Any]:
-    """Parse ``KEY=VALUE`` (VALUE as a TOML value; bare words are strings)."""
+    """Parse ``KEY=VALUE`` (VALUE as a TOML value; bare words are strings; ``none`` removes
+    the key, e.g. ``heat.radiation=none`` switches radiation off)."""
     if "=" not in text:
         raise SceneError(text, text, "overrides look like KEY=VALUE, e.g. run.duration=600")
     key, raw = text.split("=", 1)
     key, raw = key.strip(), raw.strip()
+    if raw.lower() == "none":
+        return key, None  # removes the key: switches an effect table off
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
@@ -812,6 +819,12 @@ def _check_consistency(s: Scene) -> None:
 def _check_new_effects(s: Scene) -> None:
     """Cross-field rules of [heat.convection], [heat.radiation] and [heat.internal]."""
     n, h = s.name, s.heat
+    if h.radiation is not None:
+        for i, g in enumerate(s.groups):
+            eps = g.emissivity if g.emissivity is not None else None
+            if eps is not None and eps <= 0:
+                raise SceneError(f"groups.{i}.emissivity", eps, "[heat.radiation] needs particle "
+                                 "emissivities > 0 (leave [heat.radiation] out for none)", n)
     c = h.convection
     if c is not None:
         if s.gas is None:
