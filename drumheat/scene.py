@@ -459,6 +459,11 @@ class DEMConfig:
                                              "contacts recorded so far (motion model 'replay', "
                                              "needs record_interval): hours of process time "
                                              "from a few revolutions of DEM.")
+    replay_cycle: Optional[float] = spec(None, unit="s", gt=0,
+                                         doc="With replay_after: the replayed cycle is the last "
+                                             "replay_cycle seconds of the recording (default: "
+                                             "its second half), leaving out the start-up from "
+                                             "rest; best a whole number of revolutions.")
     settle_time: float = spec(0.0, unit="s", ge=0,
                               doc="Time the bed settles with the drum at rest before t = 0.")
     gravity: float = spec(9.81, unit="m/s2", ge=0,
@@ -762,6 +767,12 @@ def _check_consistency(s: Scene) -> None:
         if s.dem.record_interval is None:
             raise SceneError("dem.replay_after", s.dem.replay_after, "needs dem.record_interval "
                              "(the contacts to replay)", n)
+        cyc = s.dem.replay_cycle if s.dem.replay_cycle is not None else 0.5 * s.dem.replay_after
+        kc = cyc / s.dem.record_interval
+        if cyc > s.dem.replay_after * (1 + 1e-9) or abs(kc - round(kc)) > 1e-6 or round(kc) < 1:
+            raise SceneError("dem.replay_cycle", cyc, "must be a whole number of "
+                             f"dem.record_interval = {s.dem.record_interval:g} s and at most "
+                             f"dem.replay_after = {s.dem.replay_after:g} s", n)
         k = s.dem.replay_after / s.run.output_interval
         if abs(k - round(k)) > 1e-6 or round(k) < 1:
             raise SceneError("dem.replay_after", s.dem.replay_after, "must be a positive "

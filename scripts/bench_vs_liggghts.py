@@ -105,9 +105,14 @@ def prepare(n, work, np_prep):
         nrun = 10000
     else:
         L = LENGTH.get(n) or n * math.pi / 6 * D_P**3 / (0.35 * 0.6 * math.pi * R_DRUM**2)
+        # 0.8 s fill/settle in two calls (each LIGGGHTS call stays below ~5 min at N = 1e4)
         run_liggghts(["-in", "in.prep", "-var", "N", str(n), "-var", "L", f"{L:.6g}",
-                      "-var", "nprep", "80000", "-var", "out", f"restart/prep_N{n}.restart"],
-                     work, f"logs/prep_N{n}.log", np_prep)
+                      "-var", "nprep", "40000", "-var", "out", f"restart/prep0_N{n}.restart"],
+                     work, f"logs/prep0_N{n}.log", np_prep)
+        run_liggghts(["-in", "in.spinup", "-var", "in", f"restart/prep0_N{n}.restart",
+                      "-var", "nrun", "40000", "-var", "out", f"restart/prep_N{n}.restart",
+                      "-var", "data", f"restart/prep_N{n}.data"], work,
+                     f"logs/prep_N{n}.log", np_prep)
         src = f"restart/prep_N{n}.restart"
         nrun = 70000
     run_liggghts(["-in", "in.spinup", "-var", "in", src, "-var", "nrun", str(nrun),

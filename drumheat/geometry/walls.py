@@ -79,7 +79,7 @@ def _embed_xy(v_xy, dim):
 
 def _safe_unit(v):
     """Unit vector and length of v (..., k); zero-length vectors give (1, 0, ...) and 0."""
-    r = jnp.sqrt(sum(v[..., k] * v[..., k] for k in range(v.shape[-1])))
+    r = jnp.sqrt(jnp.sum(v * v, axis=-1))
     safe = jnp.where(r > _TINY, r, 1.0)
     u = v / safe[..., None]
     fallback = jnp.zeros_like(v).at[..., 0].set(1.0)

@@ -282,22 +282,8 @@ def cross_a_f(a, f):
     return a[..., 0] * f[..., 1] - a[..., 1] * f[..., 0]
 
 
-def dot_last(a, b):
-    """``sum(a * b, axis=-1)`` for a short last axis (2 or 3), written out component by
-    component. The explicit sum is an elementwise expression that XLA fuses with its
-    neighbours; a reduction over a length-3 axis is lowered on CPU as a kernel of its own
-    (several per contact law, each a pass over memory: ~2/3 of the step at N = 1e3)."""
-    import os
-    if os.environ.get("DH_SUMRED"):
-        return jnp.sum(a * b, axis=-1)
-    out = a[..., 0] * b[..., 0]
-    for k in range(1, a.shape[-1]):
-        out = out + a[..., k] * b[..., k]
-    return out
-
-
 def _norm(v):
-    return jnp.sqrt(dot_last(v, v))
+    return jnp.sqrt(jnp.sum(v * v, axis=-1))
 
 
 class ContactResult(NamedTuple):
@@ -325,7 +311,7 @@ def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt
     Returns a :class:`ContactResult` with the force acting on B (A receives the opposite).
     See the module docstring for the equations.
     """
-    vn = dot_last(v_rel, n)  # > 0: separating; d(delta)/dt = -vn
+    vn = jnp.sum(v_rel * n, axis=-1)  # > 0: separating; d(delta)/dt = -vn
     gn = damping_coefficient(zeta_n, m_eff, kn)
     fn = jnp.maximum(kn * overlap - gn * vn, 0.0)
     fn = jnp.where(active, fn, 0.0)
@@ -333,9 +319,9 @@ def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt
     if v_rel_half is None:
         vt_half = vt
     else:
-        vt_half = v_rel_half - dot_last(v_rel_half, n)[..., None] * n
+        vt_half = v_rel_half - jnp.sum(v_rel_half * n, axis=-1)[..., None] * n
     # rotate the stored spring onto the current tangent plane, keeping its length
-    xi_n = dot_last(spring, n)
+    xi_n = jnp.sum(spring * n, axis=-1)
     xi_p = spring - xi_n[..., None] * n
     len_old = _norm(spring)
     len_p = _norm(xi_p)

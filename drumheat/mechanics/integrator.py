@@ -54,7 +54,6 @@ from drumheat.mechanics.contact_forces import (
     critical_time_step,
     cross_a_f,
     cross_w_a,
-    dot_last,
     rolling_torque,
 )
 from drumheat.mechanics.errors import (
@@ -529,113 +528,71 @@ def make_dem(
         return tab[ptype]
 
     def forces(pos, vel, w, t, nbrs, pair_spring, wall_spring, vel_h=None, w_h=None):
-        # vel_h, w_h: half-step velocities for the tangential spring increment if they differ
-        # from the dashpot velocities (the integrator passes one set: the dashpots and the
-        # increment both use the half-step velocities, as LIGGGHTS does)
+        # the integrator passes one set of (half-step) velocities for the dashpots and the
+        # spring increment; the relative velocity is then computed once
         split_h = vel_h is not None or w_h is not None
         vel_h = vel if vel_h is None else vel_h
         w_h = w if w_h is None else w_h
         force = mass[:, None] * g_vec
         torque = jnp.zeros_like(w)
         # ---- particle-particle -----------------------------------------------------------------
-        # one gather per side: the per-particle data (position, velocity, spin, radius, mass,
-        # inertia) packed as the columns of one (N, k) table. XLA's gathers on CPU cost about
-        # as much per row as per value, so one wide gather replaces ~10 narrow ones.
         i = nbrs.idx[0]
         j = nbrs.idx[1]
         valid = i < n
-        w_cols = w[:, None] if w.ndim == 1 else w
-        cols = [pos, vel, w_cols, radius[:, None], mass[:, None]]
-        if use_rolling:
-            cols.append(inertia[:, None])
-        if split_h:
-            cols += [vel_h, w_h[:, None] if w_h.ndim == 1 else w_h]
-        packed = jnp.concatenate(cols, axis=1)
-        # padding pairs (index N) gather zeros (mode="fill")
-        gi = packed.at[i].get(mode="fill", fill_value=0)
-        gj = packed.at[j].get(mode="fill", fill_value=0)
-        nw = w_cols.shape[1]
-        o_w = 2 * dim
-        o_r = o_w + nw
-
-        def col(g, k, width=None):
-            return g[:, k] if width is None else g[:, k:k + width]
-
-        wi = col(gi, o_w, nw)
-        wj = col(gj, o_w, nw)
-        if w.ndim == 1:
-            wi, wj = wi[:, 0], wj[:, 0]
-        ri = col(gi, o_r)
-        rj = col(gj, o_r)
-        mi = col(gi, o_r + 1)
-        mj = col(gj, o_r + 1)
-        d = displacement(col(gj, 0, dim), col(gi, 0, dim))  # from i to j
-        dist = jnp.sqrt(dot_last(d, d))
+        ii = jnp.where(valid, i, 0)
+        jj = jnp.where(valid, j, 0)
+        d = displacement(pos[jj], pos[ii])  # from i to j
+        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
         dist_safe = jnp.where(valid & (dist > 0), dist, 1.0)
         nrm = d / dist_safe[:, None]
+        ri = radius[ii]
+        rj = radius[jj]
         ovl = ri + rj - dist
         active = valid & (ovl > 0)
         a_i = (ri - 0.5 * ovl)[:, None] * nrm
         a_j = -(rj - 0.5 * ovl)[:, None] * nrm
-        v_rel = ((col(gj, dim, dim) + cross_w_a(wj, a_j))
-                 - (col(gi, dim, dim) + cross_w_a(wi, a_i)))
-        if split_h:
-            o_h = o_r + 2 + (1 if use_rolling else 0)
-            whi = col(gi, o_h + dim, nw)
-            whj = col(gj, o_h + dim, nw)
-            if w.ndim == 1:
-                whi, whj = whi[:, 0], whj[:, 0]
-            v_rel_h = ((col(gj, o_h, dim) + cross_w_a(whj, a_j))
-                       - (col(gi, o_h, dim) + cross_w_a(whi, a_i)))
-        else:
-            v_rel_h = None
-        m_eff = mi * mj / jnp.where(valid, mi + mj, 1.0)
-        if single_type:
-            ti = tj = None
-        else:
-            ii = jnp.where(valid, i, 0)
-            jj = jnp.where(valid, j, 0)
-            ti = ptype[ii]
-            tj = ptype[jj]
+        wi = w[ii]
+        wj = w[jj]
+        v_rel = (vel[jj] + cross_w_a(wj, a_j)) - (vel[ii] + cross_w_a(wi, a_i))
+        v_rel_h = ((vel_h[jj] + cross_w_a(w_h[jj], a_j)) - (vel_h[ii] + cross_w_a(w_h[ii], a_i))
+                   if split_h else None)
+        mi = mass[ii]
+        mj = mass[jj]
+        m_eff = mi * mj / (mi + mj)
+        ti = ptype[ii]
+        tj = ptype[jj]
         res = contact_law(nrm, ovl, v_rel, m_eff,
                           table(params.kn_pp, ti, tj), table(params.kt_pp, ti, tj),
                           table(params.zeta_n_pp, ti, tj), table(params.zeta_t_pp, ti, tj),
                           table(params.mu_pp, ti, tj), pair_spring, dt_c, active, v_rel_h)
         f = res.force
         seg = jnp.concatenate([i, j])  # padding N is dropped by segment_sum
-        if rotation:
+        if not rotation:
+            force = force + jax.ops.segment_sum(jnp.concatenate([-f, f]), seg, n)
+        else:
             tq_i = cross_a_f(a_i, -f)
             tq_j = cross_a_f(a_j, f)
             if use_rolling:
-                r_eff = ri * rj / jnp.where(valid, ri + rj, 1.0)
-                ii_ = col(gi, o_r + 2)
-                ij_ = col(gj, o_r + 2)
+                r_eff = ri * rj / (ri + rj)
+                ii_ = inertia[ii]
+                ij_ = inertia[jj]
                 m_r = rolling_torque(wj - wi, res.normal_force, r_eff,
-                                     table(params.mu_roll_pp, ti, tj),
-                                     ii_ * ij_ / jnp.where(valid, ii_ + ij_, 1.0), dt_c)
+                                     table(params.mu_roll_pp, ti, tj), ii_ * ij_ / (ii_ + ij_),
+                                     dt_c)
                 m_r = jnp.where(active[:, None] if m_r.ndim == 2 else active, m_r, 0.0)
                 tq_j = tq_j + m_r
                 tq_i = tq_i - m_r
-            # one scatter for forces and torques together (same order of the additions as
-            # two separate scatters, so the same sums to the last bit)
+            # forces and torques in one scatter (the same additions in the same order as two
+            # scatters); the barrier keeps XLA from fusing the contact law into the
+            # concatenation, where it would be recomputed once per output column
             tcol = (lambda a: a[:, None]) if tq_i.ndim == 1 else (lambda a: a)
-            # materialise the pair results first: fused into the concatenation XLA would
-            # recompute the whole contact law once per output column
-            import os
-            if os.environ.get("DH_SEP"):
-                force = force + jax.ops.segment_sum(jnp.concatenate([-f, f]), seg, n)
-                torque = torque + jax.ops.segment_sum(jnp.concatenate([tq_i, tq_j]), seg, n)
-            else:
-                if not os.environ.get("DH_NOBAR"):
-                    f, tq_i, tq_j = jax.lax.optimization_barrier((f, tq_i, tq_j))
-                upd = jnp.concatenate([jnp.concatenate([-f, tcol(tq_i)], axis=1),
-                                       jnp.concatenate([f, tcol(tq_j)], axis=1)])
-                tot = jax.ops.segment_sum(upd, seg, n)
-                force = force + tot[:, :dim]
-                torque = torque + (tot[:, dim] if w.ndim == 1 else tot[:, dim:])
-        else:
-            force = force + jax.ops.segment_sum(jnp.concatenate([-f, f]), seg, n)
-        rmin_pair = jnp.where(valid, jnp.minimum(ri, rj), 1.0)
+            f, tq_i, tq_j = jax.lax.optimization_barrier((f, tq_i, tq_j))
+            upd = jnp.concatenate([jnp.concatenate([-f, tcol(tq_i)], axis=1),
+                                   jnp.concatenate([f, tcol(tq_j)], axis=1)])
+            tot = jax.ops.segment_sum(upd, seg, n)
+            force = force + tot[:, :dim]
+            torque = torque + (tot[:, dim] if tq_i.ndim == 1 else tot[:, dim:])
+        rmin_pair = jnp.minimum(ri, rj)
         max_ovl = jnp.max(jnp.where(active, ovl / rmin_pair, 0.0), initial=0.0)
         # ---- particle-wall ---------------------------------------------------------------------
         if n_w > 0:
@@ -648,7 +605,7 @@ def make_dem(
             wact = wovl > 0
             a = -(r_ - 0.5 * wovl)[..., None] * wn
             v_relw = vel[:, None, :] + cross_w_a(w[:, None], a) - wv
-            v_relw_h = vel_h[:, None, :] + cross_w_a(w_h[:, None], a) - wv
+            v_relw_h = (vel_h[:, None, :] + cross_w_a(w_h[:, None], a) - wv) if split_h else None
             m_w = jnp.broadcast_to(mass[:, None], wd.shape)
             resw = contact_law(wn, wovl, v_relw, m_w,
                                wall_table(params.kn_pw), wall_table(params.kt_pw),

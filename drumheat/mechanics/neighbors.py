@@ -172,7 +172,7 @@ class NeighborSetup:
     def max_displacement_sq(self, position, nbrs):
         """Largest squared displacement (m^2) of any particle since the last build."""
         d = jax.vmap(self.displacement)(self.to_box(position), nbrs.reference_position)
-        return jnp.max(sum(d[:, k] * d[:, k] for k in range(d.shape[-1])))
+        return jnp.max(jnp.sum(d * d, axis=-1))
 
 
 def make_neighbor_setup(dim, lo, hi, cutoff, skin, periodic_length=None,

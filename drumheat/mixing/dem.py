@@ -280,7 +280,11 @@ class DEMBed:
             if n_rest > 0:  # cyclic replay of what was recorded
                 from drumheat.mixing.replay import Recording
 
-                recording = Recording(rec.arrays(self))
+                cfg = self.scene.dem
+                cycle = cfg.replay_cycle if cfg.replay_cycle is not None else 0.5 * replay_after
+                n_rec = len(rec.pair_ptr) - 1
+                recording = Recording(rec.arrays(self),
+                                      first=n_rec - int(round(cycle / cfg.record_interval)))
                 per_out = self.steps_per_output // self.steps_per_record
                 g0 = recording.n_intervals  # the first step restarts the cycle
                 Ts, Qs, _ = recording.integrate(model, state.extra["T"], state.extra["Q"], g0,

@@ -70,13 +70,24 @@ class Recording:
 
     Parameters
     ----------
+    first : int
+        First recorded interval to keep (the cycle is intervals ``first .. K-1``).
     rec : dict
         The arrays of ``contacts.npz`` (see :class:`drumheat.mixing.dem.DEMBed`): ``interval``,
         ``n_particles``, ``pair_ptr/pair_i/pair_j/pair_duration``, ``wall_ptr/wall_particle/
         wall_index/wall_duration``, ``wall_heated``, ``positions`` (K + 1, N, dim), ``group``.
     """
 
-    def __init__(self, rec: dict):
+    def __init__(self, rec: dict, first: int = 0):
+        if first:  # keep intervals first..K-1 (e.g. leave out a start-up from rest)
+            rec = dict(rec)
+            pp, wp = rec["pair_ptr"], rec["wall_ptr"]
+            for key in ("pair_i", "pair_j", "pair_duration"):
+                rec[key] = rec[key][pp[first]:]
+            for key in ("wall_particle", "wall_index", "wall_duration"):
+                rec[key] = rec[key][wp[first]:]
+            rec["pair_ptr"], rec["wall_ptr"] = pp[first:] - pp[first], wp[first:] - wp[first]
+            rec["positions"] = rec["positions"][first:]
         self.tau = float(rec["interval"])
         self.n_intervals = len(rec["pair_ptr"]) - 1
         self.n = int(rec["n_particles"])
