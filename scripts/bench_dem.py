@@ -14,7 +14,8 @@ Scenes:
   12 rpm, k_n = 2.18e5 N/m (Table 2-1 value softened 1000x), viscous damping 0.3,
   friction 0.9 / 0.6, dt = 0.2 t_crit.
 
-Usage: python scripts/bench_dem.py [--quick] [--dtype float32|float64]
+Usage: python scripts/bench_dem.py [--quick] [--dtype float32|float64] [--n 1000 10000]
+       [--dims 2 3]
 The compile time is that of the jitted loop (``lower().compile()``); the wall time excludes it.
 """
 
@@ -124,14 +125,19 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="only N = 1000")
     ap.add_argument("--dtype", default="float64", choices=["float32", "float64"])
+    ap.add_argument("--n", type=int, nargs="+", default=None,
+                    help="particle numbers (default 1e3 1e4 1e5; --quick: 1e3)")
+    ap.add_argument("--dims", type=int, nargs="+", default=[2, 3])
     args = ap.parse_args()
     dtype = jnp.float32 if args.dtype == "float32" else jnp.float64
-    sizes = [(1000, 2000, 200)] if args.quick else [
-        (1000, 2000, 200), (10000, 300, 50), (100000, 40, 10)]
+    plan = {1000: (2000, 200), 10000: (300, 50), 100000: (40, 10)}
+    ns = args.n or ([1000] if args.quick else [1000, 10000, 100000])
+    sizes = [(n,) + plan.get(n, (max(20, 2 * 10**6 // n), max(10, 2 * 10**5 // n)))
+             for n in ns]
     print(f"jax {jax.__version__} on {jax.devices()[0].platform}, mechanics dtype {args.dtype}")
     print(f"{'dim':>3} {'N':>7} {'heat':>5} {'steps':>6} {'compile s':>10} {'wall s':>8} "
           f"{'p-steps/s':>10} {'contacts/p':>10} {'rebuilds':>8}")
-    for dim in (2, 3):
+    for dim in args.dims:
         for n, steps, warm in sizes:
             for thermal in (False, True):
                 r = bench(dim, n, thermal, steps, warm, dtype)
