@@ -77,7 +77,8 @@ def load():
     return os.getloadavg()[0]
 
 
-def run_liggghts(args, cwd, log, np_=1, timeout=PREP_TIMEOUT):
+def run_liggghts(args, cwd, log, np_=1, timeout=None):
+    timeout = timeout or PREP_TIMEOUT
     cmd = mpirun(np_) + args + ["-log", log]
     with open(Path(cwd) / (log + ".screen"), "w") as scr:
         subprocess.run(cmd, cwd=cwd, stdout=scr, stderr=subprocess.STDOUT, check=True,
@@ -194,7 +195,7 @@ def time_drumheat(dat, steps, warm, thermal):
     if thermal:
         e = float(jnp.sum(out.extra * dem.particles.mass * C_P)
                   - jnp.sum(state.extra * dem.particles.mass * C_P))
-        extra = f"heat balance drift {e:.2e} J"
+        extra = f"change of the heat content {e:.2e} J (conduction only: round-off)"
     return dict(rate=n * steps / wall, wall=wall, load=ld, warm_s=t_warm,
                 rebuilds=int(out.n_rebuilds) - r0, note=extra)
 
@@ -225,6 +226,9 @@ def main():
     ap.add_argument("--thermal", default="on", choices=["on", "off"])
     ap.add_argument("--workdir", default="/tmp/drumheat_vs_liggghts")
     ap.add_argument("--prep-ranks", type=int, default=2)
+    ap.add_argument("--prep-timeout", type=int, default=PREP_TIMEOUT,
+                    help="s per LIGGGHTS preparation call (N = 1e4 needs an idle machine "
+                         "to stay below the default 300 s)")
     ap.add_argument("--no-liggghts", action="store_true", help="time drumheat only")
     args = ap.parse_args()
     sizes = [2000] if args.quick else args.n
@@ -238,6 +242,7 @@ def main():
         if f.is_file() and (f.name.startswith("in.") or f.suffix in (".py", ".sh")):
             shutil.copy(f, work / f.name)
     thermal = args.thermal == "on"
+    globals()["PREP_TIMEOUT"] = args.prep_timeout
     print(f"jax {jax.__version__} on {jax.devices()[0].platform}; drumheat float32 mechanics, "
           f"float64 temperatures; heat conduction {args.thermal}; {os.cpu_count()} CPUs")
     rows = []

@@ -54,17 +54,22 @@ def test_3d_glass_drum_slice_angle_of_repose():
     """Glass d = 8 mm, rho 2500, D = 0.25 m, 9.55 rpm, periodic axis of 4 d, 35 % fill;
     friction 0.9 / 0.6, damping 0.3; k_n = k_t = 2e3 N/m (Table 5-1's 1.22e9 softened: with
     the real stiffness 10 revolutions would take 4e7 steps; at 2e3 N/m the overlap under the
-    bed's weight is about 1 % of r)."""
+    bed's weight is about 1 % of r).
+
+    dt = 0.1 t_crit: at the default 0.2 t_crit the contacts slide where they should stick and
+    the angle came out 17.6 +- 2.7 deg (17-19 deg for N = 2000, L = 6.5 d, wall layer at half
+    the drum speed); at 0.1 and 0.05 t_crit it is 29-32 deg (N = 2000, L = 6.5 d), as LIGGGHTS
+    gets with its own contact parameters (28.6-29.3 deg, peers/liggghts/README.md)."""
     R, r, rpm = 0.125, 0.004, 9.55
     L = 4 * (2 * r)  # 4 d
     n = particles_for_filling_degree(0.35, R, r, dim=3, length=L)
     p = contact_params(2e3, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
     pk = pour(np.full(n, r), 2500.0, [DrumShell(R)], p, dim=3, periodic_length=L, seed=1)
     dem = make_dem(make_particles(pk.radius, 2500.0), [DrumShell(R, rpm=rpm)], p, dim=3,
-                   periodic_length=L)
+                   periodic_length=L, safety_factor=0.1)
     state, ang = _rotate_and_measure(dem, dem.init(pk.position), rpm)
     print(f"\n3D glass drum slice, N = {n}, 9.55 rpm: dynamic angle of repose "
           f"{ang.mean():.1f} +- {ang.std():.1f} deg over {len(ang)} samples")
     assert np.all(np.isfinite(ang))
-    assert 10.0 < ang.mean() < 60.0
+    assert 24.0 < ang.mean() < 36.0
     assert math.isfinite(float(state.time))

@@ -23,6 +23,8 @@ from drumheat.mechanics.errors import (  # noqa: F401
 )
 from drumheat.mechanics.integrator import (  # noqa: F401
     DEM,
+    FLOW_SAFETY_FACTOR,
+    DEMAccuracyWarning,
     Contacts,
     DEMState,
     Particles,
