@@ -56,3 +56,15 @@ def test_contact_tolerance_and_save_load(tmp_path):
 def test_overfull_drum_is_refused():
     with pytest.raises(ValueError, match="too full"):
         deposit_2d(np.full(200, 0.004), np.zeros(200, int), 0.05, seed=1, max_attempts=3)
+
+
+def test_a_poured_packing_file_loads_as_a_scene_packing(tmp_path):
+    from drumheat.mechanics.pour import Packing as PouredPacking
+    from drumheat.mechanics.pour import save_packing
+
+    p = np.array([[0.0, -0.02], [0.0041, -0.02]])
+    save_packing(tmp_path / "poured.npz", PouredPacking(p, np.full(2, 0.002), np.array([0, 1]),
+                                                        np.full(2, 2700.0), np.zeros(2, int)))
+    back = Packing.load(tmp_path / "poured.npz")
+    np.testing.assert_array_equal(back.diameter, [0.004, 0.004])
+    np.testing.assert_array_equal(back.position, p)

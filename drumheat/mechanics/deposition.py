@@ -42,9 +42,11 @@ class Packing(NamedTuple):
 
     @classmethod
     def load(cls, path) -> "Packing":
-        """Read a packing written by :meth:`save` (or any npz with the same arrays)."""
+        """Read a packing written by :meth:`save`, or by
+        :func:`drumheat.mechanics.pour.save_packing` (which stores radii instead of diameters)."""
         with np.load(path) as f:
-            return cls(np.asarray(f["position"], float), np.asarray(f["diameter"], float),
+            d = f["diameter"] if "diameter" in f.files else 2.0 * f["radius"]
+            return cls(np.asarray(f["position"], float), np.asarray(d, float),
                        np.asarray(f["group"], int))
 
 
