@@ -246,6 +246,7 @@ class DEM:
     _energies: Callable
     default_chunk: int = 1000
     cell_capacity: int = 0
+    _external: Optional[Callable] = None
 
     # -- construction of states --------------------------------------------------------------
 
@@ -289,6 +290,9 @@ class DEM:
         f, m, _, _, _, ovl = self._forces(state.position, state.velocity, state.angular_velocity,
                                           state.time, state.nbrs, state.pair_spring,
                                           state.wall_spring)
+        if self._external is not None:
+            f = f + jnp.asarray(self._external(state.position, state.velocity, state.time,
+                                               state.extra), dt_)
         return state._replace(force=f, torque=m, max_overlap=ovl)
 
     def _wrap(self, pos):
@@ -429,6 +433,8 @@ def make_dem(
     max_overlap: float = 0.5,
     rotation: bool = True,
     extra_update: Optional[Callable] = None,
+    external_force: Optional[Callable] = None,
+    boundary_update: Optional[Callable] = None,
     chunk: int = 1000,
 ) -> DEM:
     """Compose a DEM system (static choices are fixed here, before ``jit``).
@@ -452,6 +458,13 @@ def make_dem(
       rotation: integrate particle spin (False freezes it, like PFC's "fix spin").
       extra_update: ``extra_update(extra, state, contacts, dt) -> extra``, called at the end of
         every step inside the scan (plug a thermal update in here).
+      external_force: ``external_force(position, velocity, t, extra) -> (N, dim)`` force (N)
+        added to the contact forces and gravity every step (e.g. gas drag); it enters the
+        second half-kick of the step, so it acts on the velocity at the new positions.
+      boundary_update: ``boundary_update(state) -> state``, called last in every step (after
+        ``extra_update``): open boundaries, e.g. particles leaving through an outlet re-entering
+        at an inlet. A hook that moves particles must also clear their ``wall_spring`` rows;
+        their pair springs lapse at the next neighbour rebuild (pairs are matched by identity).
       chunk: default number of steps per checked chunk in :meth:`DEM.run`.
     """
     if dim not in (2, 3):
@@ -723,6 +736,8 @@ def make_dem(
             extra = dict(extra, pair_data=pdata)
         f, tq, spring, wspring, contacts, ovl = forces(x, v, w, t, nbrs, spring,
                                                        state.wall_spring)
+        if external_force is not None:
+            f = f + external_force(x, v, t, extra).astype(dtype)
         v = v + half * f * inv_m[:, None]
         if rotation:
             w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
@@ -732,6 +747,8 @@ def make_dem(
                        extra=extra)
         if extra_update is not None:
             new = new._replace(extra=extra_update(new.extra, new, contacts, dt))
+        if boundary_update is not None:
+            new = boundary_update(new)
         return new, contacts
 
     def energies(state):
@@ -770,5 +787,5 @@ def make_dem(
         max_overlap=float(max_overlap), domain_lo=dom_lo, domain_hi=dom_hi,
         _forces=jax.jit(forces), _step=jax.jit(step),
         _run_steps=jax.jit(run_steps), _diag=diag, _energies=jax.jit(energies), default_chunk=int(chunk),
-        cell_capacity=cell_cap,
+        cell_capacity=cell_cap, _external=external_force,
     )
