@@ -183,6 +183,31 @@ class Contacts(NamedTuple):
     wall_normal_force: jax.Array
 
 
+# XLA:CPU options for the DEM kernels. Its YNNPACK library fusions (on by default in jaxlib
+# 0.10) run the narrow (pairs, 3) element-wise work of the contact law 2-30x slower than XLA's
+# own loop fusions: on the N = 2000 3D drum of scripts/bench_vs_liggghts.py they doubled the
+# CPU time per step (3.2 vs 1.6 ms). Per-executable, so nothing else in the process changes;
+# GPU backends ignore the option.
+JIT_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+
+
+def _jit(fun):
+    return jax.jit(fun, compiler_options=JIT_OPTIONS)
+
+
+def _materialize(tree, pred):
+    """Return ``tree`` unchanged but computed once, before its consumers run.
+
+    XLA:CPU removes ``optimization_barrier`` before fusion, and its fusion heuristics then fuse
+    the contact law into the concatenation of the scatter update, recomputing it for each of
+    the output columns (measured: half of the force kernel). A conditional on a runtime
+    predicate is a fusion boundary that XLA cannot remove; ``pred`` must always be true at
+    run time (the other branch, never taken, returns zeros so that the branches differ).
+    """
+    return jax.lax.cond(pred, lambda t: t,
+                        lambda t: jax.tree_util.tree_map(jnp.zeros_like, t), tree)
+
+
 def pair_extra(extra):
     """User per-pair data carried across neighbour rebuilds: ``extra["pair_data"]``.
 
@@ -223,6 +248,12 @@ class DEM:
     max_overlap (fraction of the smaller radius that stops a run).
     Functions: :meth:`init`, :meth:`step`, :meth:`run`, :meth:`run_steps`, :meth:`contacts`,
     :meth:`energies`, :meth:`reallocate`.
+
+    ``step_fn(state) -> (state, contacts)`` and ``run_steps_fn(state, n_steps) -> state`` are
+    the same functions un-jitted, for composing them into a larger program (``vmap`` over an
+    ensemble, ``shard_map``): the methods are jitted with :data:`JIT_OPTIONS`, and JAX accepts
+    compiler options on the top-level ``jit`` only, so pass ``compiler_options=JIT_OPTIONS``
+    to the ``jit`` around your program.
     """
 
     dt: float
@@ -247,6 +278,8 @@ class DEM:
     default_chunk: int = 1000
     cell_capacity: int = 0
     _external: Optional[Callable] = None
+    step_fn: Optional[Callable] = None
+    run_steps_fn: Optional[Callable] = None
 
     # -- construction of states --------------------------------------------------------------
 
@@ -634,7 +667,7 @@ def make_dem(
             # scatters); the barrier keeps XLA from fusing the contact law into the
             # concatenation, where it would be recomputed once per output column
             tcol = (lambda a: a[:, None]) if tq_i.ndim == 1 else (lambda a: a)
-            f, tq_i, tq_j = jax.lax.optimization_barrier((f, tq_i, tq_j))
+            f, tq_i, tq_j = _materialize((f, tq_i, tq_j), i[0] <= n)
             upd = jnp.concatenate([jnp.concatenate([-f, tcol(tq_i)], axis=1),
                                    jnp.concatenate([f, tcol(tq_j)], axis=1)])
             tot = jax.ops.segment_sum(upd, seg, n)
@@ -785,7 +818,7 @@ def make_dem(
         dt=dt, t_crit=t_crit, m_min=m_min, k_max=k_max, dim=dim, walls=walls,
         particles=particles, params=params, neighbor=neighbor, dtype=dtype, gravity=gravity,
         max_overlap=float(max_overlap), domain_lo=dom_lo, domain_hi=dom_hi,
-        _forces=jax.jit(forces), _step=jax.jit(step),
-        _run_steps=jax.jit(run_steps), _diag=diag, _energies=jax.jit(energies), default_chunk=int(chunk),
-        cell_capacity=cell_cap, _external=external_force,
+        _forces=_jit(forces), _step=_jit(step), _run_steps=_jit(run_steps), _diag=diag,
+        _energies=_jit(energies), default_chunk=int(chunk),
+        cell_capacity=cell_cap, _external=external_force, step_fn=step, run_steps_fn=run_steps,
     )
