@@ -191,7 +191,7 @@ class LossConfig:
 
 
 CONVECTION_CORRELATIONS = ("constant", "gnielinski", "gnielinski-staltner", "ranz-marshall",
-                           "fluidized-bed")
+                           "fluidized-bed", "gnielinski-kraychev")
 
 
 @dataclass(frozen=True)
@@ -209,7 +209,9 @@ class ConvectionConfig:
                                 "Pr^1/3 (staltner [3.25]-[3.28]); 'ranz-marshall': Nu = 2 + "
                                 "0.6 Re^1/2 Pr^1/3 (kraychev (3-14)); 'fluidized-bed': mean of "
                                 "the loosening point (packed bed, factor f_a) and the discharge "
-                                "point (single sphere), fluidized-bed-exercise.md section 5.")
+                                "point (single sphere), fluidized-bed-exercise.md section 5; "
+                                "'gnielinski-kraychev': L = d, Nu_lam = 0.664 Re^1/2 Pr^1/3, "
+                                "exact VDI Nu_turb (kraychev (3-16)-(3-18), digest 14.1).")
     alpha: Optional[float] = spec(None, unit="W/(m2 K)", gt=0,
                                   doc="alpha on the sphere surface pi d^2; required for "
                                       "correlation 'constant'.")
@@ -343,6 +345,7 @@ MOTION_MODELS = {
     "fluidized": "drumheat.mixing.fluidized:FluidizedBed",
     "dem": "drumheat.mixing.dem:DEMBed",
     "replay": "drumheat.mixing.replay:ReplayBed",
+    "pneumatic": "drumheat.mixing.pneumatic:PneumaticChannel",
 }
 
 #: Motion models whose particles lie in the drum of the ``[drum]`` table.
@@ -478,6 +481,44 @@ class DEMConfig:
 
 
 @dataclass(frozen=True)
+class ChannelConfig:
+    """``[channel]``: vertical pneumatic channel of motion model 'pneumatic'.
+
+    Kraychev digest (kraychev-tube-bundle.md) sections 1, 2, 6: particles carried upward by
+    gas in plug flow; y up (gas and solids), x across the gap between two walls, z along the
+    channel length (the simulated slice of depth ``depth`` is periodic in z).
+    """
+
+    height: float = spec(unit="m", gt=0, doc="Channel height (inlet y = 0, outlet y = height).")
+    gap: float = spec(unit="m", gt=0, doc="Clear width between the two channel walls (x).")
+    depth: float = spec(unit="m", gt=0, doc="Simulated slice of the channel length (z, "
+                                            "periodic); at least 2 x the neighbour cutoff.")
+    length: float = spec(unit="m", gt=0, doc="Channel length along the apparatus that "
+                                             "solids_mass_flow refers to (L_App).")
+    gas_velocity: float = spec(unit="m/s", gt=0, doc="Superficial gas velocity at the inlet "
+                                                     "(plug flow; mass flux conserved).")
+    solids_mass_flow: float = spec(unit="kg/s", gt=0,
+                                   doc="Solids fed into the whole channel length; the slice "
+                                       "gets depth/length of it.")
+    particle_inlet_velocity: float = spec(0.0, unit="m/s", ge=0,
+                                          doc="Upward velocity of particles entering at y = 0.")
+    inlet_velocity_spread: float = spec(0.0, unit="m/s", ge=0,
+                                        doc="Entering particles get random horizontal velocity "
+                                            "components, uniform in +-this value (lateral "
+                                            "dispersion: collisions with walls and particles).")
+    cells: int = spec(52, ge=1, doc="Axial gas cells of the plug-flow energy balance.")
+    gas_coupling: str = spec("two-way", choices=("two-way", "none"),
+                             doc="'two-way': the gas temperature follows from its energy "
+                                 "balance cell by cell; 'none': the gas keeps its inlet "
+                                 "temperature (no heat coupling back to the gas).")
+    drag_law: str = spec("schiller_naumann", choices=("schiller_naumann", "newton", "stokes"),
+                         doc="Single-sphere drag coefficient (drumheat.models.drag).")
+    steady_after: Optional[float] = spec(None, unit="s", ge=0,
+                                         doc="Start of the averaging window of the *_steady "
+                                             "columns; default half the duration.")
+
+
+@dataclass(frozen=True)
 class ReplayConfig:
     """``[replay]``: thermal-only replay of a recorded contact network (motion 'replay')."""
 
@@ -531,6 +572,8 @@ class Scene:
     replay: Optional[ReplayConfig] = spec(None, doc="Recorded contacts (motion model 'replay').")
     granulator: Optional[GranulatorConfig] = spec(None, doc="Granulator geometry and process "
                                                             "(motion model 'granulator').")
+    channel: Optional[ChannelConfig] = spec(None, doc="Pneumatic channel (motion model "
+                                                      "'pneumatic').")
     source_path: Optional[str] = field(default=None, compare=False,
                                        metadata=dict(internal=True))
 
@@ -823,6 +866,10 @@ def _check_consistency(s: Scene) -> None:
         if g.h4 / math.tan(math.radians(g.alpha4)) >= g.r2:
             raise SceneError("granulator.h4", g.h4, "the cone closes before its top "
                              "(r5 = r2 - h4/tan(alpha4) <= 0); reduce h4 or raise alpha4", n)
+    if s.motion.model == "pneumatic":
+        from drumheat.mixing.pneumatic import check_scene
+
+        check_scene(s)
     if s.packing.method == "file" and s.packing.file is None:
         raise SceneError("packing.file", _MISSING_VALUE, "method 'file' needs a path to an .npz "
                          "packing", n)
@@ -853,7 +900,7 @@ def _check_new_effects(s: Scene) -> None:
             raise SceneError("heat.convection.alpha", c.alpha, f"correlation {c.correlation!r} "
                              "computes alpha; leave alpha out or use correlation 'constant'", n)
         if (c.correlation not in ("constant",) and c.velocity is None
-                and s.motion.model != "granulator"):
+                and s.motion.model not in ("granulator", "pneumatic")):
             raise SceneError("heat.convection.velocity", _MISSING_VALUE,
                              f"correlation {c.correlation!r} needs the gas velocity, in m/s", n)
         if c.properties == "gas" and c.correlation != "constant":

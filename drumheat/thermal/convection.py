@@ -7,6 +7,8 @@ Heat flow into particle i: ``alpha_i pi d_i^2 (T_g - T_i)`` on the whole sphere 
   (fluidized-bed-exercise.md section 3, :func:`~drumheat.models.convection.fluidized_bed_sphere_nu`);
 * ``"gnielinski-staltner"``: ``L = pi d / 2``, ``Nu_lam = 0.664 Re^1/2 Pr^1/3``
   (staltner-slag-particle.md [3.25]-[3.28]);
+* ``"gnielinski-kraychev"``: ``L = d``, ``Nu_lam = 0.664 Re^1/2 Pr^1/3`` and the exact VDI
+  ``Nu_turb`` (kraychev-tube-bundle.md (3-16)-(3-19), errata 14.1);
 * ``"ranz-marshall"``: ``Nu = 2 + 0.6 Re^1/2 Pr^1/3``, ``L = d`` (kraychev-tube-bundle.md (3-14));
 * ``"fluidized-bed"``: the exercise's mean ``alpha_a = (alpha_L + alpha_A)/2`` of the loosening
   point (packed bed, ``f_a = 1 + 1.5 (1 - psi_L)``, interstitial Re) and the discharge point
@@ -84,6 +86,9 @@ def nusselt_alpha(correlation, d, velocity, rho, cp, lam, nu, porosity=None,
     elif correlation == "gnielinski-staltner":
         L = jnp.pi * d / 2.0
         Nu = corr.gnielinski_sphere_nu(corr.reynolds(w, L, nu), Pr)
+    elif correlation == "gnielinski-kraychev":
+        L = d  # kraychev (3-16)-(3-19), exact VDI form (digest 14.1), Re on d_p
+        Nu = corr.gnielinski_sphere_nu(corr.reynolds(w, L, nu), Pr, "vdi")
     elif correlation == "ranz-marshall":
         L = d
         Nu = corr.ranz_marshall_nu(corr.reynolds(w, L, nu), Pr)

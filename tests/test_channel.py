@@ -1,0 +1,207 @@
+"""Motion model 'pneumatic' (scene kraychev-channel): drag, convection, plug-flow gas balance,
+open inlet/outlet. Each test runs a small channel for a fraction of a second."""
+
+import math
+import warnings
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from drumheat.mixing.pneumatic import PneumaticChannel, cocurrent_outlet, march_gas
+from drumheat.models import drag
+from drumheat.runner import energy_balance
+from drumheat.scene import SceneError, load_scene, scene_from_dict
+from drumheat.thermal.convection import _air_clipped, nusselt_alpha
+
+T_GAS = 293.15
+
+
+def channel_scene(*, d, rho, count, height, gap, depth, u, m_s, v_in=0.0, duration, dt,
+                  output_interval=None, T_p=313.15, convection=None, coupling="two-way",
+                  cells=20, skin=None, stiffness=1.0, properties="polynomial", steady=None,
+                  c=1520.0, spread=0.0):
+    raw = {
+        "name": "test-channel", "dim": 3,
+        "run": {"duration": duration, "output_interval": output_interval or duration, "seed": 3},
+        "groups": [{"name": "p", "count": count, "diameter": d, "material": "wheat",
+                    "density": rho, "heat_capacity": c, "temperature": T_p}],
+        "gas": {"temperature": T_GAS, "heat_capacity": 1000.0, "density": 1.2,
+                "kinematic_viscosity": 1.5e-5, "conductivity": 0.026},
+        "channel": {"height": height, "gap": gap, "depth": depth, "length": depth,
+                    "gas_velocity": u, "solids_mass_flow": m_s, "particle_inlet_velocity": v_in,
+                    "inlet_velocity_spread": spread, "cells": cells, "gas_coupling": coupling},
+        "dem": {"stiffness": stiffness, "dt": dt, "restitution": 0.5},
+        "motion": {"model": "pneumatic"},
+    }
+    if skin is not None:
+        raw["dem"]["skin"] = skin
+    if steady is not None:
+        raw["channel"]["steady_after"] = steady
+    if convection is not None:
+        raw["heat"] = {"convection": dict(convection, properties=properties)}
+    return scene_from_dict(raw)
+
+
+def run(scene):
+    model = PneumaticChannel(scene)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a single particle leaves the feeder "starved"
+        traj = model.trajectory(progress=False)
+    return model, traj
+
+
+def test_scene_loads_and_wheat_rises():
+    scene = load_scene("kraychev-channel")
+    model = PneumaticChannel(scene)
+    rho, _, _, nu = (float(x) for x in _air_clipped(scene.gas.temperature))
+    W_t = float(drag.terminal_velocity(4.07e-3, 1315.0, rho, nu * rho, g=9.81))
+    assert 11.0 < W_t < 12.0 < scene.channel.gas_velocity  # wheat is carried up at 16.5 m/s
+    est = model.holdup_estimate()
+    assert est["holdup_particles"] < 0.8 * scene.n_particles  # the queue never runs dry
+    with pytest.raises(SceneError, match="heat.contact"):
+        load_scene("kraychev-channel", ["heat.contact.alpha=100"])
+    with pytest.raises(SceneError, match="channel.gap"):
+        load_scene("kraychev-channel", ["channel.gap=0.004"])
+
+
+def test_single_particle_reaches_terminal_slip():
+    d, rho_p, u = 50e-6, 1315.0, 0.5
+    scene = channel_scene(d=d, rho=rho_p, count=1, height=0.2, gap=0.005, depth=0.012, u=u,
+                          m_s=1e-3, duration=0.3, dt=2e-4, skin=0.005, stiffness=1e-4)
+    model, traj = run(scene)
+    st = model.final_state
+    assert bool(st.extra["active"][0])
+    rho, _, _, nu = (float(x) for x in _air_clipped(T_GAS))
+    W_t = float(drag.terminal_velocity(d, rho_p, rho, nu * rho, "schiller_naumann", g=9.81))
+    v = np.asarray(st.velocity[0])
+    assert v[1] == pytest.approx(u - W_t, rel=1e-9)
+    assert abs(v[0]) < 1e-12 and abs(v[2]) < 1e-12
+
+
+def test_particle_temperature_follows_gnielinski_exponential():
+    # a hovering wheat grain (gas velocity = terminal velocity), gas held at its inlet
+    # temperature: T - T_g = (T0 - T_g) exp(-alpha A t / (m c)), alpha at slip = W_t
+    d, rho_p, c = 4.07e-3, 1315.0, 1520.0
+    rho, cp, lam, nu = (float(x) for x in _air_clipped(T_GAS))
+    W_t = float(drag.terminal_velocity(d, rho_p, rho, nu * rho, g=9.81))
+    scene = channel_scene(d=d, rho=rho_p, count=1, height=0.1, gap=0.018, depth=0.02, u=W_t,
+                          m_s=10.0, duration=0.5, output_interval=0.1, dt=1e-4, stiffness=10.0,
+                          convection={"correlation": "gnielinski-kraychev"}, coupling="none")
+    model, traj = run(scene)
+    st = model.final_state
+    assert abs(float(st.velocity[0, 1])) < 1e-9 and bool(st.extra["active"][0])
+    alpha = float(nusselt_alpha("gnielinski-kraychev", d, W_t, rho, cp, lam, nu))
+    tau = rho_p * c * d / (6 * alpha)
+    t_heat = traj.t - model.dt  # released at the end of the first step
+    expected = T_GAS + (313.15 - T_GAS) * np.exp(-np.maximum(t_heat, 0) / tau)
+    np.testing.assert_allclose(traj.T[1:, 0] - T_GAS, expected[1:] - T_GAS, rtol=1e-5)
+    # the particle's own alpha is the correlation's (slip = W_t): 20 K in, about 300 W/(m2 K)
+    assert traj.extra["alpha_mean"][-1] == pytest.approx(alpha, rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def busy_channel():
+    """A short, loaded channel: contacts, exits, re-entries, two-way heat coupling."""
+    scene = channel_scene(d=4e-3, rho=1300.0, count=60, height=0.08, gap=0.012, depth=0.016,
+                          u=16.0, m_s=0.05, v_in=2.0, duration=0.12, output_interval=0.04, dt=5e-5,
+                          stiffness=2e3, convection={"correlation": "gnielinski-kraychev"},
+                          cells=8, spread=1.5)
+    return run(scene)
+
+
+def test_energy_balance_closes_to_round_off(busy_channel):
+    model, traj = busy_channel
+    st = model.final_state
+    assert float(np.sum(traj.n_contacts)) > 0  # collisions happened
+    stored = (traj.T - traj.T[0]) @ traj.capacity
+    q_gas, q_flow = traj.Q["gas"], traj.Q["flow"]
+    assert abs(q_flow[-1]) > 0 and abs(q_gas[-1]) > 0
+    scale = float(np.max(np.abs(q_gas)))
+    # particles: stored heat = heat from the gas + enthalpy in - enthalpy out
+    np.testing.assert_allclose(stored, q_gas + q_flow, atol=1e-11 * scale)
+    # gas side: enthalpy in - out = heat the particles took up
+    np.testing.assert_allclose(-traj.extra["H_gas"], -q_gas, atol=1e-11 * scale)
+    # gas enthalpy in - out + particle enthalpy in - out = change of stored heat
+    np.testing.assert_allclose(traj.extra["H_gas"] + q_flow, stored, atol=1e-11 * scale)
+    assert energy_balance(traj)[1] < 1e-11
+    assert int(np.sum(np.asarray(st.extra["active"]))) > 0
+
+
+def test_exits_are_parked_and_reenter_at_inlet_temperature(busy_channel):
+    model, traj = busy_channel
+    _, _, boundary = model._hooks()
+    st = model.final_state
+    ex = st.extra
+    assert int(model.steady["released"]) > 0 and np.isfinite(traj.extra["T_particle_out"][-1])
+    parked = ~np.asarray(ex["active"])
+    np.testing.assert_array_equal(np.asarray(ex["T"])[parked], model.T_inlet[parked])
+    # one particle pushed past the outlet with a marked temperature
+    i = int(np.flatnonzero(np.asarray(ex["active"]))[0])
+    T_mark = 350.0
+    acc0 = model._zero_acc()
+    extra = dict(ex, T=ex["T"].at[i].set(T_mark), credit=jnp.zeros(()), acc=acc0,
+                 Q={"gas": jnp.zeros(()), "flow": jnp.zeros(())})
+    pos = st.position.at[i, 1].set(model.H + 1e-4)
+    s1 = boundary(st._replace(position=pos, extra=extra))
+    C = model.capacity[i]
+    assert not bool(s1.extra["active"][i])
+    assert float(s1.extra["T"][i]) == model.T_inlet[i]
+    np.testing.assert_allclose(np.asarray(s1.position[i]), model.park[i])
+    assert float(s1.extra["Q"]["flow"]) == pytest.approx(C * (model.T_inlet[i] - T_mark))
+    assert float(s1.extra["acc"]["CT_exit"]) == pytest.approx(C * T_mark)
+    # with feeder credit, the longest-waiting particle enters at y = r at the inlet velocity
+    waiting = ~np.asarray(s1.extra["active"])
+    j = int(np.argmin(np.where(waiting, np.asarray(s1.extra["park_time"]), np.inf)))
+    s2 = boundary(s1._replace(extra=dict(s1.extra, credit=jnp.asarray(1.0))))
+    assert bool(s2.extra["active"][j])
+    assert float(s2.position[j, 1]) == pytest.approx(model.radius[j])
+    assert float(s2.extra["T"][j]) == model.T_inlet[j]
+    v = np.asarray(s2.velocity[j])
+    assert v[1] == model.scene.channel.particle_inlet_velocity
+    assert np.all(np.abs(v[[0, 2]]) <= model.scene.channel.inlet_velocity_spread)
+
+
+def test_march_gas_is_the_cellwise_exponential():
+    G = jnp.array([0.0, 2.0, 0.5, 3.0])
+    T = jnp.array([0.0, 330.0, 320.0, 310.0])
+    T_nodes, T_eff = march_gas(G, G * T, 290.0, 1.5)
+    Tin = 290.0
+    for k in range(4):
+        Tb = T[k]
+        Tout = Tb + (Tin - Tb) * math.exp(-float(G[k]) / 1.5) if G[k] > 0 else Tin
+        assert float(T_nodes[k + 1]) == pytest.approx(Tout, rel=1e-14)
+        if G[k] > 0:  # what the particles get is what the gas gives
+            assert float(G[k] * (T_eff[k] - Tb)) == pytest.approx(1.5 * (Tin - Tout), rel=1e-12)
+        Tin = Tout
+
+
+def test_gas_outlet_matches_cocurrent_ntu_solution():
+    # a uniform stream: particles fed at their terminal rise velocity never meet, all with
+    # the same constant alpha; the co-current two-stream exchanger is then exact
+    d, rho_p, c, u = 2e-3, 1000.0, 1000.0, 9.0
+    rho_g, nu_g = 1.2, 1.5e-5
+    W_t = float(drag.terminal_velocity(d, rho_p, rho_g, nu_g * rho_g, g=9.81))
+    v = u - W_t
+    m_p = rho_p * math.pi * d**3 / 6
+    gap, depth, H = 0.01, 0.04, 0.2
+    m_gas = rho_g * u * gap * depth
+    m_s = m_gas * 1000.0 / c  # equal capacity rates
+    scene = channel_scene(d=d, rho=rho_p, count=200, height=H, gap=gap, depth=depth, u=u,
+                          m_s=m_s, v_in=v, duration=0.45, output_interval=0.05, dt=8e-5,
+                          stiffness=100.0, convection={"correlation": "constant",
+                                                       "alpha": 2000.0},
+                          properties="gas", c=c, cells=40, steady=0.15)
+    model, traj = run(scene)
+    ev = model.steady
+    assert ev["starved_steps"] == 0 and ev["blocked_steps"] == 0
+    assert ev["velocity_mean"] == pytest.approx(v, rel=1e-6)  # nobody collided
+    C_s, C_g = ev["solids_mass_flow"] * c, m_gas * 1000.0
+    assert C_s == pytest.approx(m_s * c, rel=0.02)
+    # UA from the simulated hold-up (alpha x the particle surface in the channel)
+    UA = ev["UA"]
+    assert UA == pytest.approx(2000.0 * math.pi * d**2 * m_s * (H - d / 2) / (v * m_p), rel=0.03)
+    Ts, Tg = cocurrent_outlet(313.15, T_GAS, C_s, C_g, UA)
+    # measured: 0.04 % (gas rise) and 0.08 % (particle drop) at NTU = 1.17
+    assert ev["T_gas_out"] - T_GAS == pytest.approx(Tg - T_GAS, rel=0.005)
+    assert 313.15 - ev["T_particle_out"] == pytest.approx(313.15 - Ts, rel=0.005)
