@@ -10,6 +10,7 @@ The public API is imported lazily so that ``import drumheat.models.penetration``
     scene = dh.load_scene("weigler-static", overrides={"run.duration": 600.0})
     result = dh.run(scene)
     result.timeseries          # pandas DataFrame: t, T_mean, T_mean:<group>, ...
+    ensemble = dh.run_ensemble(scene, {"heat.contact.alpha": [80.0, 105.0, 130.0]})
 """
 
 import importlib
@@ -28,6 +29,8 @@ _LAZY = {
     "run": "drumheat.runner",
     "Result": "drumheat.runner",
     "materials": "drumheat.materials",
+    "run_ensemble": "drumheat.ensemble",
+    "EnsembleResult": "drumheat.ensemble",
 }
 
 

@@ -112,7 +112,7 @@ def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
 
 
 def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None = True,
-        params: dict | None = None, overrides: dict | None = None) -> Result:
+        params: dict | None = None, overrides: dict | None = None, devices=None) -> Result:
     """Run a scene and return its :class:`Result`; write result files if ``out`` is given.
 
     Parameters
@@ -128,6 +128,13 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         calibration; prefer ``overrides`` otherwise).
     overrides : dict, optional
         Dotted-key overrides applied and validated before the run.
+    devices : None, "all", int or list of jax.Device, optional
+        Split the particle arrays (temperatures, positions, velocities, particle properties)
+        over these devices (:func:`drumheat.sharding.shard_particles`; motion models
+        ``static`` and ``dem``). The results equal those of one device to round-off; the
+        particle count should be a multiple of the device count. Default: one device. For
+        many variants of a scene use :func:`drumheat.run_ensemble`, which splits the
+        variants over the devices instead.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
@@ -135,8 +142,41 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         scene = scene.with_overrides(overrides)
     start = time.perf_counter()
     motion = make_motion(scene)
+    mesh = None
+    if devices is not None:
+        from drumheat.sharding import make_mesh, resolve_devices
+
+        devs = resolve_devices(devices)
+        if devs is not None and len(devs) > 1:
+            if not getattr(motion, "supports_particle_sharding", False):
+                raise ValueError(f"motion model {scene.motion.model!r} does not support "
+                                 "devices= (particle-axis sharding); supported: static, dem")
+            mesh = make_mesh(devs)
+    if mesh is not None:
+        motion.mesh = mesh
     traj = motion.trajectory(params, progress=progress)
     wall_time = time.perf_counter() - start
+    result = make_result(scene, traj, wall_time)
+    if out is not None:
+        result.save(out)
+    return result
+
+
+def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
+    """A :class:`Result` from a finished trajectory: time series, energy balance, summary.
+
+    Parameters
+    ----------
+    scene : Scene
+    traj : Trajectory
+    wall_time : float
+        Wall-clock time of the run, s (goes into the summary).
+
+    Raises
+    ------
+    FloatingPointError
+        If a temperature became NaN or Inf.
+    """
     ts = build_timeseries(scene, traj)
     _, rel = energy_balance(traj)
     if not np.all(np.isfinite(traj.T)):
@@ -154,7 +194,4 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         "n_wall_contacts": float(np.mean(traj.n_wall_contacts)),
     }
     summary.update({k: float(v) for k, v in ts.iloc[-1].items() if k != "t"})
-    result = Result(scene, traj, ts, summary)
-    if out is not None:
-        result.save(out)
-    return result
+    return Result(scene, traj, ts, summary)

@@ -469,6 +469,7 @@ def make_dem(
     external_force: Optional[Callable] = None,
     boundary_update: Optional[Callable] = None,
     chunk: int = 1000,
+    batch_axis: Optional[str] = None,
 ) -> DEM:
     """Compose a DEM system (static choices are fixed here, before ``jit``).
 
@@ -499,6 +500,12 @@ def make_dem(
         at an inlet. A hook that moves particles must also clear their ``wall_spring`` rows;
         their pair springs lapse at the next neighbour rebuild (pairs are matched by identity).
       chunk: default number of steps per checked chunk in :meth:`DEM.run`.
+      batch_axis: name of a ``jax.vmap`` axis over which the step is batched (ensembles of
+        states, :func:`drumheat.run_ensemble`). The neighbour list is then rebuilt for every
+        member of the batch when any member needs it (a ``psum`` over the axis), so that the
+        rebuild stays a real ``lax.cond`` instead of being computed every step; because the
+        pairs are kept in canonical order (:func:`~drumheat.mechanics.neighbors.sort_pairs`)
+        an extra rebuild does not change the trajectory. Leave None for single runs.
     """
     if dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3, got {dim}")
@@ -764,6 +771,8 @@ def make_dem(
             nbrs, spring, count, pdata = rebuild(args)
         else:
             need = neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
+            if batch_axis is not None:
+                need = jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
             nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
         if pdata is not None:
             extra = dict(extra, pair_data=pdata)

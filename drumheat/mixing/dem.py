@@ -73,22 +73,36 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h) -> Co
 
 
 def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
-                        dt: float):
+                        dt: float, batch_axis: str | None = None):
     """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
 
     The ``extra`` state is a dict with ``T`` (N,) K, ``Q`` {account: J}, ``k`` (steps since the
     last thermal step), ``wall_time`` and ``rec_wall_time`` (N * n_walls,) s, and
     ``pair_data`` = {"time", "rec_time"} (M,) s aligned with the neighbour pairs (the
     integrator carries ``extra["pair_data"]`` across rebuilds like the tangential springs).
+
+    If ``extra`` also holds ``"model"`` (the array leaves of a thermal model with the same
+    structure as ``model``, ``eqx.partition(m, eqx.is_array)[0]``), that model is used instead
+    of ``model``: the thermal parameters are then part of the state, and a ``vmap`` over states
+    runs variants with different parameters (:func:`drumheat.run_ensemble`). ``batch_axis``
+    names that vmap axis: the thermal sub-step then stays a real ``lax.cond`` (all members
+    count the same steps).
     """
+    import equinox as eqx
+
     h = substeps * dt
     heated = jnp.asarray(wall_heated, bool)
+    skeleton = eqx.partition(model, eqx.is_array)[1]
+
+    def model_of(extra):
+        return eqx.combine(extra["model"], skeleton) if "model" in extra else model
 
     def thermal_step(extra, idx):
         net = thermal_network(idx, n, extra["pair_data"]["time"], extra["wall_time"], heated,
                               n_walls, h)
-        q, ext = model.heat_flows(extra["T"], net)
-        T = extra["T"] + h * q / model.particles.capacity
+        m = model_of(extra)
+        q, ext = m.heat_flows(extra["T"], net)
+        T = extra["T"] + h * q / m.particles.capacity
         Q = {a: extra["Q"][a] + h * ext[a] for a in extra["Q"]}
         pair = dict(extra["pair_data"], time=jnp.zeros_like(extra["pair_data"]["time"]))
         return dict(extra, T=T, Q=Q, k=jnp.zeros_like(extra["k"]), pair_data=pair,
@@ -103,7 +117,10 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
                      rec_wall_time=extra["rec_wall_time"] + wm, k=extra["k"] + 1)
         if substeps == 1:
             return thermal_step(extra, state.nbrs.idx)
-        return jax.lax.cond(extra["k"] >= substeps, thermal_step, lambda e, _: e, extra,
+        go = extra["k"] >= substeps
+        if batch_axis is not None:
+            go = jax.lax.psum(go.astype(jnp.int32), batch_axis) > 0
+        return jax.lax.cond(go, thermal_step, lambda e, _: e, extra,
                             state.nbrs.idx)
 
     return update
@@ -126,6 +143,11 @@ class DEMBed:
         Needs ``[drum]`` and ``[dem]``; 2D (monolayer) or 3D (slice of axial length
         ``drum.depth``, periodic along the axis).
     """
+
+    #: ``drumheat.run(..., devices=)`` may split the particle axis of the DEM state
+    supports_particle_sharding = True
+    #: device mesh over which the particle arrays are split (set by the runner), or None
+    mesh = None
 
     def __init__(self, scene: Scene):
         if scene.dem is None:
@@ -213,14 +235,19 @@ class DEMBed:
         self._packing = np.asarray(pos, float)
         return self._packing
 
-    def make_dem(self, model: ThermalModel):
-        """The DEM system with the coupled thermal update of ``model``."""
+    def make_dem(self, model: ThermalModel, batch_axis: str | None = None):
+        """The DEM system with the coupled thermal update of ``model``.
+
+        ``batch_axis``: the name of a vmap axis over states (ensembles), see
+        :func:`drumheat.mechanics.make_dem` and :func:`make_thermal_update`.
+        """
         update = make_thermal_update(model, self.n, len(self.walls), self.wall_heated,
-                                     self.substeps, self.dt)
+                                     self.substeps, self.dt, batch_axis=batch_axis)
         return make_dem(self.mech, self.walls, self.params, dim=self.dim, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.periodic,
                         skin=self.scene.dem.skin, dtype=self.dtype, extra_update=update,
-                        chunk=self.steps_per_record or self.steps_per_output)
+                        chunk=self.steps_per_record or self.steps_per_output,
+                        batch_axis=batch_axis)
 
     def model(self, params=None):
         """Thermal model and initial temperatures (as :class:`StaticBed`)."""
@@ -239,6 +266,10 @@ class DEMBed:
         state = dem.init(pos0)
         cap = state.nbrs.idx.shape[1]
         state = state._replace(extra=initial_extra(model, T0, cap, self.n, len(self.walls)))
+        if self.mesh is not None:  # positions, velocities, temperatures, springs split by particle
+            from drumheat.sharding import shard_particles
+
+            state = shard_particles(state, self.mesh, self.n)
         n_w = len(self.walls)
         out = dict(T=[np.asarray(T0)], pos=[np.asarray(pos0)], Q={a: [0.0] for a in model.accounts},
                    n_pairs=[], n_wall=[], rebuilds=[])
@@ -297,6 +328,17 @@ class DEMBed:
                     out["n_pairs"].append(recording.mean_pairs)
                     out["n_wall"].append(recording.mean_wall)
         self.recording = rec
+        return self.make_trajectory(model, out, n_coupled, rec)
+
+    def make_trajectory(self, model: ThermalModel, out: dict, n_coupled: int,
+                        rec=None) -> Trajectory:
+        """The :class:`Trajectory` from the outputs collected during a run.
+
+        ``out`` holds lists over the output times: ``T`` (N,), ``pos`` (N, dim), ``Q``
+        {account: [J]}, and per output interval ``n_pairs``, ``n_wall`` (mean contacts);
+        ``n_coupled`` output intervals were simulated with mechanics (the rest replayed);
+        ``rec`` is the contact recorder or None.
+        """
         n_pairs = np.array([out["n_pairs"][0]] + out["n_pairs"])
         n_wall = np.array([out["n_wall"][0]] + out["n_wall"])
         # eq. [1.10] area: d^2 x wall contacts, averaged from the start (thesis App. A9 uses the

@@ -68,6 +68,8 @@ class RandomBed(StaticBed):
         Nominal diameter of every position of the packing, m (the permutation classes).
     """
 
+    supports_particle_sharding = False
+
     def __init__(self, scene: Scene):
         super().__init__(scene)
         self.t_R = float(scene.motion.t_R)

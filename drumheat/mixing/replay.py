@@ -151,6 +151,8 @@ class Recording:
 class ReplayBed(StaticBed):
     """Thermal-only replay of a recorded contact network (see the module docstring)."""
 
+    supports_particle_sharding = False
+
     def __init__(self, scene: Scene):
         self.scene = scene
         path = Path(scene.replay.file)

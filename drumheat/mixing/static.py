@@ -136,6 +136,10 @@ class StaticBed:
     """
 
     autodiff = "reverse"
+    #: ``drumheat.run(..., devices=)`` may split the particle axis of this model's arrays
+    supports_particle_sharding = True
+    #: device mesh over which the particle arrays are split (set by the runner), or None
+    mesh = None
 
     def __init__(self, scene: Scene):
         self.scene = scene
@@ -159,6 +163,10 @@ class StaticBed:
         Differentiable with respect to the values in ``params`` (dotted scene keys).
         """
         model, T0 = self.model(params)
+        if self.mesh is not None:
+            from drumheat.sharding import shard_particles
+
+            model, T0 = shard_particles((model, T0), self.mesh, self.scene.n_particles)
         states = integrate_network(self.scene, model, self.net, initial_state(model, T0),
                                    self.t_out, progress, autodiff=self.autodiff)
         self._last_states = states
@@ -169,6 +177,11 @@ class StaticBed:
         model, _ = self.model(params)
         with SimProgress(self.scene.run.duration, progress) as bar:
             T, Q = self.solve(params, bar)
+        return self.make_trajectory(model, T, Q, self._last_states)
+
+    def make_trajectory(self, model: ThermalModel, T, Q, states) -> Trajectory:
+        """The :class:`Trajectory` of a solved run (``T``, ``Q`` from :func:`stack_states`,
+        ``states`` the list of states at the output times)."""
         n_out = len(self.t_out)
         d = self.packing.diameter
         return Trajectory(
@@ -179,7 +192,7 @@ class StaticBed:
             n_contacts=np.full(n_out, len(self.pairs)),
             n_wall_contacts=np.full(n_out, len(self.wall_particles)),
             wall_area=np.full(n_out, float(np.sum(d[self.wall_particles] ** 2))),
-            stored_heat=shell_stored_heat(model, self._last_states))
+            stored_heat=shell_stored_heat(model, states))
 
 
 def shell_stored_heat(model: ThermalModel, states):
