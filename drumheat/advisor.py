@@ -111,6 +111,14 @@ def explain(scene) -> Advice:
     N = scene.n_particles
     A_s, A_p = math.pi * d**2, math.pi * d**2 / 4
     motion = make_motion(scene)
+    if not hasattr(motion, "model"):
+        from drumheat.scene import SceneError
+
+        raise SceneError("motion.model", scene.motion.model,
+                         "'drumheat explain' sizes the effects of beds whose heat runs through "
+                         "the thermal network (static, random, replay, dem, granulator, "
+                         "fluidized); this motion model couples its gas itself and reports its "
+                         "heat balance in the result files", scene.name)
     model, _ = motion.model()
     net = motion.net
     eff = {type(e).__name__: e for e in model.effects}

@@ -63,6 +63,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
+from drumheat.mechanics.integrator import JIT_OPTIONS
 from drumheat.scene import Scene, SceneError, load_scene
 
 __all__ = ["EnsembleResult", "EnsembleWarning", "expand_overrides", "run_ensemble"]
@@ -703,7 +704,8 @@ def _run_dem(scenes: list[Scene], variants, devs, progress):
     def unstack(batch):
         return [jax.tree_util.tree_map(lambda a: a[v], batch) for v in range(n_var)]
 
-    run_steps = jax.jit(jax.vmap(dem._run_steps, in_axes=(0, None), axis_name=_BATCH_AXIS))
+    run_steps = jax.jit(jax.vmap(dem.run_steps_fn, in_axes=(0, None), axis_name=_BATCH_AXIS),
+                        compiler_options=JIT_OPTIONS)
     diag = jax.jit(jax.vmap(dem._diag))
     batch = stack(states)
     heated = np.tile(b0.wall_heated, n)

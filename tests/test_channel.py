@@ -205,3 +205,11 @@ def test_gas_outlet_matches_cocurrent_ntu_solution():
     # measured: 0.04 % (gas rise) and 0.08 % (particle drop) at NTU = 1.17
     assert ev["T_gas_out"] - T_GAS == pytest.approx(Tg - T_GAS, rel=0.005)
     assert 313.15 - ev["T_particle_out"] == pytest.approx(313.15 - Ts, rel=0.005)
+
+
+def test_explain_refuses_the_channel_with_a_clear_message():
+    """``drumheat explain`` covers network-based beds; the channel gets exit code 2 and a
+    message naming motion.model instead of a traceback."""
+    from drumheat.cli import main
+
+    assert main(["explain", "kraychev-channel"]) == 2
