@@ -40,7 +40,8 @@ class Result:
         Particle temperatures (and positions) at the output times.
     timeseries : pandas.DataFrame
         Columns ``t`` (s), ``T_mean`` (K, mass-weighted), ``T_mean:<group>``, ``T_min``,
-        ``T_max`` and, as the scene calls for, ``Q_wall`` (J received from walls since t = 0),
+        ``T_max`` and, as the scene calls for, ``Q_wall`` (J received from walls since t = 0;
+        a drum with internals adds ``Q_wall:shell``, ``Q_wall:inner``, ``Q_wall:plates``),
         ``Q_loss`` (J lost to the gas since t = 0) and ``alpha_overall`` (W/(m2 K), eq. [1.10]).
     summary : dict
         What ``summary.json`` holds.
@@ -97,6 +98,9 @@ def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
     cols["T_min"], cols["T_max"] = traj.T.min(axis=1), traj.T.max(axis=1)
     if "wall" in traj.Q:
         cols["Q_wall"] = traj.Q["wall"]
+    surfaces = sorted(a for a in traj.Q if a.startswith("wall:"))
+    if surfaces:  # a drum with internals: the total here, each surface (Q_wall:<surface>) below
+        cols["Q_wall"] = sum(traj.Q[a] for a in surfaces)
     if "wall" in traj.Q and scene.drum is not None and scene.drum.wall_temperature is not None:
         T_cap = traj.T @ traj.capacity / traj.capacity.sum()
         cols["alpha_overall"] = np.asarray(observe.alpha_overall(

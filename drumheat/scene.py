@@ -112,6 +112,52 @@ class DrumConfig:
                                                  "exchanges no heat.")
     depth: Optional[float] = spec(None, unit="m", gt=0,
                                   doc="Axial length of a 3D drum slice (dim = 3).")
+    # internals (herz-sectional-drum.md section 1); all optional, absent = a plain drum
+    sections: Optional[int] = spec(None, ge=0,
+                                   doc="Number of radial plates, evenly spaced, joining the "
+                                       "inner cylinder (or the axis) to the shell and rotating "
+                                       "with the drum; they divide the drum into as many "
+                                       "sections. Leave out (or 0) for none. Motion model "
+                                       "'dem' only.")
+    inner_diameter: Optional[float] = spec(None, unit="m", ge=0,
+                                           doc="Diameter of an inner cylinder on the drum axis, "
+                                               "rotating with the drum; leave out (or 0) for "
+                                               "none. Motion model 'dem' only.")
+    plate_thickness: Optional[float] = spec(None, unit="m", ge=0,
+                                            doc="Thickness of the radial plates (default 0: "
+                                                "plates of zero thickness).")
+    plate_phase: Optional[float] = spec(None, unit="deg",
+                                        doc="Polar angle (counter-clockwise from +x) of plate 0 "
+                                            "at t = 0; plate j lies at plate_phase - j 360/"
+                                            "sections. Default 180: section 0 starts at the "
+                                            "Herz angle delta = 0 (herz-sectional-drum.md eq. "
+                                            "17).")
+    plate_temperature: Optional[float] = spec(None, unit="K", gt=0,
+                                              doc="Temperature of the radial plates; leave out "
+                                                  "for plates that exchange no heat.")
+    inner_temperature: Optional[float] = spec(None, unit="K", gt=0,
+                                              doc="Temperature of the inner cylinder; leave out "
+                                                  "for one that exchanges no heat.")
+
+    @property
+    def has_internals(self) -> bool:
+        """True when the drum has radial plates or an inner cylinder."""
+        return bool(self.sections) or bool(self.inner_diameter)
+
+    def heated_surfaces(self) -> tuple[tuple[str, str], ...]:
+        """``(surface name, dotted key of its temperature)`` of every surface that exchanges
+        heat, in wall-id order. A plain drum has one surface named ``wall`` (the shell); a drum
+        with internals names them ``shell``, ``inner`` and ``plates``."""
+        if not self.has_internals:
+            return (("wall", "drum.wall_temperature"),) if self.wall_temperature is not None \
+                else ()
+        out = []
+        for name, key, present in (("shell", "wall_temperature", True),
+                                   ("inner", "inner_temperature", bool(self.inner_diameter)),
+                                   ("plates", "plate_temperature", bool(self.sections))):
+            if present and getattr(self, key) is not None:
+                out.append((name, f"drum.{key}"))
+        return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -548,6 +594,13 @@ class PackingConfig:
                                         "diameter count as touching.")
     file: Optional[str] = spec(None, doc="Packing .npz (arrays position, diameter, group) for "
                                          "method 'file'; relative to the scene file.")
+    surface_angle: Optional[float] = spec(None, unit="deg", gt=-90, lt=90,
+                                          doc="Drum with radial plates and method 'pour': "
+                                              "inclination of each section's initial free "
+                                              "surface to the horizontal, positive falling "
+                                              "towards +x (a drum turning clockwise, rpm < 0, "
+                                              "holds its bed so); default 0. Starting near "
+                                              "the angle of repose shortens the warm-up.")
 
 
 @dataclass(frozen=True)
@@ -785,9 +838,27 @@ def _check_consistency(s: Scene) -> None:
             raise SceneError("groups", f"{s.n_particles} particles",
                              f"the particles cover {solid / drum:.0%} of the drum cross-section; "
                              "a monolayer packing holds at most about 80 %", n)
-    if s.heat.wall is not None and (s.drum is None or s.drum.wall_temperature is None):
+    if s.heat.wall is not None and (s.drum is None or not s.drum.heated_surfaces()):
         raise SceneError("drum.wall_temperature", _MISSING_VALUE,
                          "[heat.wall] needs the wall temperature, in K", n)
+    if s.drum is not None and s.drum.has_internals:
+        d = s.drum
+        if s.motion.model != "dem":
+            raise SceneError("drum.sections" if d.sections else "drum.inner_diameter",
+                             d.sections or d.inner_diameter, "drum internals (radial plates, "
+                             "inner cylinder) need motion model 'dem'", n)
+        if d.inner_diameter and d.inner_diameter >= d.diameter:
+            raise SceneError("drum.inner_diameter", d.inner_diameter,
+                             f"must be smaller than drum.diameter = {d.diameter:g} m", n)
+        if d.sections and s.packing.method == "deposition":
+            raise SceneError("packing.method", "deposition", "the geometric deposition does not "
+                             "know the radial plates; use 'pour' (fills every section equally) "
+                             "or 'file'", n)
+        for key, present in (("plate_temperature", bool(d.sections)),
+                             ("inner_temperature", bool(d.inner_diameter))):
+            if getattr(d, key) is not None and not present:
+                raise SceneError(f"drum.{key}", getattr(d, key), "there is no such surface "
+                                 "(drum.sections / drum.inner_diameter is 0 or left out)", n)
     for eff in ("contact", "wall"):
         cfg = getattr(s.heat, eff)
         if cfg is not None and cfg.model == "constant" and cfg.alpha is None:

@@ -39,6 +39,8 @@ __all__ = [
     "save_packing",
     "load_packing",
     "particles_for_filling_degree",
+    "pour_sections",
+    "section_of",
 ]
 
 
@@ -205,6 +207,79 @@ def pour(radius, density, walls, params, *, dim, group=None, ptype=None, layered
     pos = np.zeros((n, dim))
     pos[placed_idx] = placed_pos
     info = dict(dim=dim, periodic_length=periodic_length, seed=seed, layered=bool(layered))
+    return Packing(pos, r_all, grp, rho_all, pt, info)
+
+
+def section_of(position, n_sections, phase):
+    """Section index of each point of a drum with ``n_sections`` radial plates, (N,) int.
+
+    Plate ``j`` lies at the polar angle ``phase - j 2 pi / n_sections`` (rad); section ``j`` is
+    the sector between plates ``j`` and ``j + 1`` (clockwise from plate ``j``).
+    """
+    p = np.asarray(position, float)
+    phi = np.arctan2(p[..., 1], p[..., 0])
+    alpha = 2.0 * math.pi / n_sections
+    k = np.floor(np.mod(phase - phi, 2.0 * math.pi) / alpha).astype(int)
+    return np.clip(k, 0, n_sections - 1)
+
+
+def pour_sections(radius, density, walls, params, *, n_sections, phase, dim, group=None,
+                  ptype=None, layered=True, periodic_length=None, gravity=None, seed=0,
+                  dt=None, safety_factor=0.2, ke_tol=1e-4, min_time=0.05, max_time=0.5,
+                  surface_angle=0.0, chunk=2000, dtype=jnp.float64,
+                  verbose=False) -> Packing:
+    """Fill a drum divided by radial plates with the same number of particles per section.
+
+    Like :func:`pour`, but the insertion sites (square lattice of spacing 1.1 x the largest
+    diameter, at least 1.05 r_max from every wall) are assigned to the sections of
+    :func:`section_of` and each section takes the lowest ``N / n_sections`` of its sites (the
+    first ``N mod n_sections`` sections one more), jittered by up to 4 % of the spacing. All
+    particles are inserted at once and settle together with the drum at rest. Every section so
+    carries the same load (herz-sectional-drum.md section 1: all sections carry the same
+    filling degree), which pouring from above would not give: it fills the lowest sections
+    first. ``layered`` puts the first group at the bottom of every section.
+
+    ``surface_angle`` (degrees) tilts the free surfaces: sites are taken lowest first along
+    ``n = (sin g, cos g)``, so each section's surface falls towards +x at g (Herz's convention,
+    herz-sectional-drum.md section 1), e.g. near the angle of repose to shorten a warm-up.
+    The settling stops at ``max_time`` (default 0.5 s) at the latest.
+    """
+    r_all = np.asarray(radius, dtype=float).reshape(-1)
+    n = r_all.size
+    rho_all = np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
+    grp = np.zeros(n, int) if group is None else np.asarray(group, int).reshape(-1)
+    pt = np.zeros(n, int) if ptype is None else np.asarray(ptype, int).reshape(-1)
+    walls_rest = walls_at_rest(walls)
+    rng = np.random.default_rng(seed)
+    r_max = float(r_all.max())
+    spacing = 2.2 * r_max
+    sites = insertion_sites(walls_rest, dim, spacing, 1.05 * r_max, None, periodic_length)
+    sec = section_of(sites[:, :2], n_sections, phase)
+    order = np.argsort(grp, kind="stable") if layered else rng.permutation(n)
+    counts = np.full(n_sections, n // n_sections)
+    counts[: n % n_sections] += 1
+    pos = np.zeros((n, dim))
+    start = 0
+    for k in range(n_sections):
+        mine = sites[sec == k]
+        if len(mine) < counts[k]:
+            raise ValueError(f"section {k} holds {len(mine)} insertion sites but needs "
+                             f"{counts[k]} particles; lower the particle count")
+        g = math.radians(surface_angle)
+        height = mine[:, 0] * math.sin(g) + mine[:, 1] * math.cos(g)
+        mine = mine[np.argsort(height, kind="stable")][: counts[k]]
+        idx = order[start:start + counts[k]]
+        start += counts[k]
+        pos[idx] = mine + rng.uniform(-0.04, 0.04, mine.shape) * spacing
+    if periodic_length is not None:
+        pos[:, -1] %= periodic_length
+    g_norm = 9.81 if gravity is None else float(np.linalg.norm(gravity))
+    idx = np.arange(n)
+    pos = _settle(idx, pos, r_all, rho_all, pt, walls_rest, params, dim, periodic_length, None,
+                  gravity, dt, safety_factor, ke_tol, g_norm, min_time, max_time, chunk, dtype,
+                  verbose)
+    info = dict(dim=dim, periodic_length=periodic_length, seed=seed, layered=bool(layered),
+                n_sections=n_sections)
     return Packing(pos, r_all, grp, rho_all, pt, info)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from drumheat.bed import (group_index, group_property, initial_packing, initial_temperatures,
                           make_particles, output_times, scene_values)
-from drumheat.geometry.walls import DrumShell
+from drumheat.geometry.walls import DrumShell, InnerCylinder, RadialPlate
 from drumheat.materials import material
 from drumheat.mechanics import DEMError, contact_params, make_dem
 from drumheat.mechanics import make_particles as mechanical_particles
@@ -46,7 +46,40 @@ def _steps(interval: float, dt: float) -> int:
     return max(1, int(round(interval / dt)))
 
 
-def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h) -> ContactNetwork:
+def drum_walls(scene: Scene) -> list:
+    """The walls of the scene's drum: the shell, then the inner cylinder, then the plates.
+
+    All rotate with ``drum.rpm`` about the axis. Plate ``j`` lies at the polar angle
+    ``plate_phase - j 360/sections`` (degrees, counter-clockwise from +x) at t = 0, from the
+    inner cylinder (or the axis) to the shell. Section ``j`` lies between plates ``j`` and
+    ``j + 1``: with the drum turning clockwise (rpm < 0) plate ``j`` is the section's plate 1
+    (``B1C1``) and plate ``j + 1`` its plate 2 of herz-sectional-drum.md section 1, and the
+    section's rotation angle is ``delta_j = 180 - plate angle of j`` (eq. 17).
+
+    Every surface that carries a temperature gets the wall id of its place in
+    ``drum.heated_surfaces()``, so the wall effect books its heat separately; a surface without
+    a temperature exchanges no heat (its wall id is irrelevant and set to 0).
+    """
+    d = scene.drum
+    R = 0.5 * d.diameter
+    ids = {name: k for k, (name, _) in enumerate(d.heated_surfaces())}
+    shell_id = ids.get("shell", ids.get("wall", 0))
+    walls = [DrumShell(R, rpm=d.rpm, temperature=d.wall_temperature, wall_id=shell_id)]
+    R2 = 0.5 * (d.inner_diameter or 0.0)
+    if R2 > 0:
+        walls.append(InnerCylinder(R2, rpm=d.rpm, temperature=d.inner_temperature,
+                                   wall_id=ids.get("inner", 0)))
+    n_sec = d.sections or 0
+    phase0 = 180.0 if d.plate_phase is None else d.plate_phase
+    for j in range(n_sec):
+        walls.append(RadialPlate(R2, R, phase=math.radians(phase0 - j * 360.0 / n_sec),
+                                 rpm=d.rpm, thickness=d.plate_thickness or 0.0,
+                                 temperature=d.plate_temperature, wall_id=ids.get("plates", 0)))
+    return walls
+
+
+def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
+                    wall_ids=None) -> ContactNetwork:
     """Contact network of one thermal step from accumulated contact times.
 
     Parameters
@@ -58,9 +91,12 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h) -> Co
     wall_time : array (n * n_walls,)
         Time each (particle, wall primitive) touched, s, row-major.
     wall_heated : bool array (n_walls,)
-        Primitives that exchange heat (they carry a temperature); their contacts get wall id 0.
+        Primitives that exchange heat (they carry a temperature).
     h : float
         Thermal step, s; weights are contact-time fractions ``time / h``.
+    wall_ids : int array (n_walls,), optional
+        Wall id (index into the wall effect's temperatures) of each primitive; default 0 for
+        all (a drum whose only heated wall is the shell).
     """
     valid = idx[0] < n
     i = jnp.where(valid, idx[0], 0)
@@ -69,11 +105,16 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h) -> Co
     wp = jnp.repeat(jnp.arange(n), n_walls)
     wk = jnp.tile(jnp.arange(n_walls), n)
     w_wall = wall_time / h * wall_heated[wk]
-    return ContactNetwork(i, j, w_pair, wp, jnp.zeros_like(wp), w_wall)
+    wid = jnp.zeros_like(wp) if wall_ids is None else jnp.asarray(wall_ids, wp.dtype)[wk]
+    return ContactNetwork(i, j, w_pair, wp, wid, w_wall)
 
 
 def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
+<<<<<<< HEAD
                         dt: float, batch_axis: str | None = None):
+=======
+                        dt: float, wall_ids=None):
+>>>>>>> herz
     """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
 
     The ``extra`` state is a dict with ``T`` (N,) K, ``Q`` {account: J}, ``k`` (steps since the
@@ -99,10 +140,16 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
 
     def thermal_step(extra, idx):
         net = thermal_network(idx, n, extra["pair_data"]["time"], extra["wall_time"], heated,
+<<<<<<< HEAD
                               n_walls, h)
         m = model_of(extra)
         q, ext = m.heat_flows(extra["T"], net)
         T = extra["T"] + h * q / m.particles.capacity
+=======
+                              n_walls, h, wall_ids)
+        q, ext = model.heat_flows(extra["T"], net)
+        T = extra["T"] + h * q / model.particles.capacity
+>>>>>>> herz
         Q = {a: extra["Q"][a] + h * ext[a] for a in extra["Q"]}
         pair = dict(extra["pair_data"], time=jnp.zeros_like(extra["pair_data"]["time"]))
         return dict(extra, T=T, Q=Q, k=jnp.zeros_like(extra["k"]), pair_data=pair,
@@ -165,9 +212,9 @@ class DEMBed:
         density = np.array([float(group_property(scene, value, k, "density"))
                             for k in range(n_groups)])[self.group]
         self.n = len(self.diameter)
-        R = 0.5 * scene.drum.diameter
-        self.walls = [DrumShell(R, rpm=scene.drum.rpm, temperature=scene.drum.wall_temperature)]
+        self.walls = drum_walls(scene)
         self.wall_heated = np.array([w.temperature is not None for w in self.walls])
+        self.wall_ids = np.array([w.wall_id for w in self.walls], np.int32)
         k_n = cfg.stiffness
         if k_n is None:
             E = min(float(group_property(scene, value, k, "youngs_modulus"))
@@ -221,7 +268,22 @@ class DEMBed:
         if self._packing is not None:
             return self._packing
         scene = self.scene
-        if scene.packing.method == "pour":
+        if scene.packing.method == "pour" and scene.drum.sections:
+            from drumheat.mechanics.pour import pour_sections
+
+            d, cfg_dem = scene.drum, scene.dem
+            pk = pour_sections(
+                0.5 * self.diameter, np.asarray(self.mech.mass) / (
+                    4 / 3 * np.pi * (0.5 * self.diameter) ** 3), self.walls, self.params,
+                n_sections=d.sections,
+                phase=math.radians(180.0 if d.plate_phase is None else d.plate_phase),
+                dim=self.dim, group=self.group,
+                layered=scene.packing.arrangement == "layers", periodic_length=self.periodic,
+                gravity=self.gravity, seed=scene.run.seed, dtype=self.dtype,
+                safety_factor=cfg_dem.safety_factor,
+                surface_angle=scene.packing.surface_angle or 0.0)
+            pos = pk.position
+        elif scene.packing.method == "pour":
             from drumheat.mechanics.pour import pour
 
             pk = pour(0.5 * self.diameter, np.asarray(self.mech.mass) / (
@@ -242,7 +304,11 @@ class DEMBed:
         :func:`drumheat.mechanics.make_dem` and :func:`make_thermal_update`.
         """
         update = make_thermal_update(model, self.n, len(self.walls), self.wall_heated,
+<<<<<<< HEAD
                                      self.substeps, self.dt, batch_axis=batch_axis)
+=======
+                                     self.substeps, self.dt, self.wall_ids)
+>>>>>>> herz
         return make_dem(self.mech, self.walls, self.params, dim=self.dim, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.periodic,
                         skin=self.scene.dem.skin, dtype=self.dtype, extra_update=update,
@@ -448,7 +514,8 @@ class _Recorder:
             wall_particle=cat(self.wall_p, np.int32), wall_index=cat(self.wall_k, np.int32),
             wall_duration=cat(self.wall_dur, np.float64),
             wall_ptr=np.asarray(self.wall_ptr, np.int64),
-            wall_heated=bed.wall_heated, diameter=bed.diameter, group=bed.group,
+            wall_heated=bed.wall_heated, wall_ids=bed.wall_ids, diameter=bed.diameter,
+            group=bed.group,
             positions=np.stack(self.positions).astype(np.float32), scene=bed.scene.to_toml())
 
     def save(self, path, bed: DEMBed):

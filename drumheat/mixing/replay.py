@@ -94,11 +94,15 @@ class Recording:
         i, j, w = _pad_csr(rec["pair_ptr"], (rec["pair_i"], rec["pair_j"],
                                              rec["pair_duration"] / self.tau), (0, 0, 0.0), None)
         heated = np.asarray(rec["wall_heated"], float)[rec["wall_index"]]
-        wp, ww = _pad_csr(rec["wall_ptr"], (rec["wall_particle"],
-                                            rec["wall_duration"] / self.tau * heated), (0, 0.0),
-                          None)
+        # wall id of each contact (drums with internals book each surface separately)
+        ids = (np.asarray(rec["wall_ids"], np.int32)[rec["wall_index"]] if "wall_ids" in rec
+               else np.zeros(len(rec["wall_index"]), np.int32))
+        wp, ww, wid = _pad_csr(rec["wall_ptr"], (rec["wall_particle"],
+                                                 rec["wall_duration"] / self.tau * heated, ids),
+                               (0, 0.0, 0), None)
         self.pairs = (jnp.asarray(i, jnp.int32), jnp.asarray(j, jnp.int32), jnp.asarray(w, float))
-        self.walls = (jnp.asarray(wp, jnp.int32), jnp.asarray(ww, float))
+        self.walls = (jnp.asarray(wp, jnp.int32), jnp.asarray(ww, float),
+                      jnp.asarray(wid, jnp.int32))
         self.positions = np.asarray(rec["positions"], float)
         self.span = self.tau * self.n_intervals
         self.mean_pairs = float(np.sum(rec["pair_duration"])) / self.span
@@ -109,8 +113,8 @@ class Recording:
     def network(self, k) -> ContactNetwork:
         """Contact network of interval ``k`` (weights = contact-time fractions)."""
         i, j, w = (a[k] for a in self.pairs)
-        wp, ww = (a[k] for a in self.walls)
-        return ContactNetwork(i, j, w, wp, jnp.zeros_like(wp), ww)
+        wp, ww, wid = (a[k] for a in self.walls)
+        return ContactNetwork(i, j, w, wp, wid, ww)
 
     def integrate(self, model, T0, Q0, g0: int, steps_per_output: int, n_outputs: int,
                   progress: SimProgress | None = None, t0: float = 0.0):

@@ -64,8 +64,8 @@ def temperature_bounds(scene) -> tuple[float, float]:
     Ts = [g.temperature for g in scene.groups]
     if scene.gas is not None:
         Ts.append(scene.gas.temperature)
-    if scene.drum is not None and scene.drum.wall_temperature is not None:
-        Ts.append(scene.drum.wall_temperature)
+    if scene.drum is not None:
+        Ts += [scene.get(key) for _, key in scene.drum.heated_surfaces()]
     r = scene.heat.radiation
     if r is not None:
         if r.sink_temperature is not None:
@@ -91,9 +91,11 @@ def _wall(scene, value: ValueFn, particles=None) -> WallConduction:
         alpha = value("heat.wall.alpha")
     else:
         alpha = _schluender(scene, value, _mean_diameter(scene))[0]
-    return WallConduction(alpha=jnp.asarray(alpha, float),
-                          wall_temperature=jnp.atleast_1d(jnp.asarray(
-                              value("drum.wall_temperature"), float)))
+    surfaces = scene.drum.heated_surfaces()  # wall id k = surfaces[k]
+    temps = jnp.stack([jnp.asarray(value(key), float) for _, key in surfaces])
+    names = None if not scene.drum.has_internals else tuple(s for s, _ in surfaces)
+    return WallConduction(alpha=jnp.asarray(alpha, float), wall_temperature=temps,
+                          surfaces=names)
 
 
 def _loss(scene, value: ValueFn, particles=None) -> HeatLoss:
@@ -145,8 +147,17 @@ class ThermalModel(eqx.Module):
 
     @property
     def accounts(self) -> tuple[str, ...]:
-        """Names of the outside reservoirs the bed exchanges heat with ("wall", "gas", ...)."""
-        return tuple(sorted({e.account for e in self.effects if e.account is not None}))
+        """Names of the outside reservoirs the bed exchanges heat with ("wall", "gas", ...).
+
+        An effect that splits its heat by surface (``account_flows``, e.g. the walls of a drum
+        with internals: ``wall:shell``, ``wall:plates``, ...) contributes its ``accounts``."""
+        names = set()
+        for e in self.effects:
+            if hasattr(e, "account_flows"):
+                names.update(e.accounts)
+            elif e.account is not None:
+                names.add(e.account)
+        return tuple(sorted(names))
 
     def heat_flows(self, T: Array, net: ContactNetwork) -> tuple[Array, dict[str, Array]]:
         """Total heat flow into each particle (W, shape (N,)) and the heat flow from each
@@ -154,6 +165,12 @@ class ThermalModel(eqx.Module):
         total = jnp.zeros_like(T)
         external = {a: jnp.zeros((), T.dtype) for a in self.accounts}
         for effect in self.effects:
+            if hasattr(effect, "account_flows"):
+                q_slots = effect.slot_flows(T, self.particles, net)
+                total = total.at[net.wall_particle].add(q_slots)
+                for a, v in effect.account_flows(q_slots, net).items():
+                    external[a] = external[a] + v
+                continue
             q = effect.heat_flow(T, self.particles, net)
             total = total + q
             if effect.account is not None:

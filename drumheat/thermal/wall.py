@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import ClassVar, Optional
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -23,11 +23,37 @@ class WallConduction(eqx.Module):
         alpha_wp, W/(m2 K).
     wall_temperature : array, shape (n_walls,)
         Temperature of each wall, K (indexed by ``ContactNetwork.wall_id``).
+
+    surfaces : tuple of str or None (static)
+        Names of the walls (one per wall id). When given, the heat from each wall is booked
+        in its own account ``wall:<name>`` (:meth:`account_flows`), so a drum with internals
+        reports the shell, the inner cylinder and the plates separately; when None all walls
+        share the account ``wall``.
     """
 
     alpha: Array
     wall_temperature: Array
+    surfaces: Optional[tuple] = eqx.field(static=True, default=None)
     account: ClassVar[str | None] = "wall"
+
+    @property
+    def accounts(self) -> tuple[str, ...]:
+        """The accounts this effect books heat into."""
+        if self.surfaces is None:
+            return ("wall",)
+        return tuple(f"wall:{s}" for s in self.surfaces)
+
+    def account_flows(self, q_slots: Array, net: ContactNetwork) -> dict[str, Array]:
+        """Heat flow from each wall (W, by account) from the per-slot flows ``q_slots``."""
+        if self.surfaces is None:
+            return {"wall": jnp.sum(q_slots)}
+        per = jnp.zeros(len(self.surfaces), q_slots.dtype).at[net.wall_id].add(q_slots)
+        return {a: per[k] for k, a in enumerate(self.accounts)}
+
+    def slot_flows(self, T: Array, particles: ThermalParticles, net: ContactNetwork) -> Array:
+        """Heat flow through every wall-contact slot into its particle, W."""
+        Tw = self.wall_temperature[net.wall_id]
+        return self.conductance(particles, net) * (Tw - T[net.wall_particle])
 
     def conductance(self, particles: ThermalParticles, net: ContactNetwork) -> Array:
         """Conductance of every wall-contact slot, W/K."""
@@ -35,8 +61,7 @@ class WallConduction(eqx.Module):
 
     def heat_flow(self, T: Array, particles: ThermalParticles, net: ContactNetwork) -> Array:
         """Heat flow into each particle, W, shape (N,)."""
-        Tw = self.wall_temperature[net.wall_id]
-        q = self.conductance(particles, net) * (Tw - T[net.wall_particle])
+        q = self.slot_flows(T, particles, net)
         return jnp.zeros_like(T).at[net.wall_particle].add(q)
 
     def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork) -> Array:
