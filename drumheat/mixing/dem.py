@@ -110,11 +110,7 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
 
 
 def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
-<<<<<<< HEAD
-                        dt: float, batch_axis: str | None = None):
-=======
-                        dt: float, wall_ids=None):
->>>>>>> herz
+                        dt: float, batch_axis: str | None = None, wall_ids=None):
     """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
 
     The ``extra`` state is a dict with ``T`` (N,) K, ``Q`` {account: J}, ``k`` (steps since the
@@ -140,16 +136,10 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
 
     def thermal_step(extra, idx):
         net = thermal_network(idx, n, extra["pair_data"]["time"], extra["wall_time"], heated,
-<<<<<<< HEAD
-                              n_walls, h)
+                              n_walls, h, wall_ids)
         m = model_of(extra)
         q, ext = m.heat_flows(extra["T"], net)
         T = extra["T"] + h * q / m.particles.capacity
-=======
-                              n_walls, h, wall_ids)
-        q, ext = model.heat_flows(extra["T"], net)
-        T = extra["T"] + h * q / model.particles.capacity
->>>>>>> herz
         Q = {a: extra["Q"][a] + h * ext[a] for a in extra["Q"]}
         pair = dict(extra["pair_data"], time=jnp.zeros_like(extra["pair_data"]["time"]))
         return dict(extra, T=T, Q=Q, k=jnp.zeros_like(extra["k"]), pair_data=pair,
@@ -304,11 +294,8 @@ class DEMBed:
         :func:`drumheat.mechanics.make_dem` and :func:`make_thermal_update`.
         """
         update = make_thermal_update(model, self.n, len(self.walls), self.wall_heated,
-<<<<<<< HEAD
-                                     self.substeps, self.dt, batch_axis=batch_axis)
-=======
-                                     self.substeps, self.dt, self.wall_ids)
->>>>>>> herz
+                                     self.substeps, self.dt, batch_axis=batch_axis,
+                                     wall_ids=self.wall_ids)
         return make_dem(self.mech, self.walls, self.params, dim=self.dim, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.periodic,
                         skin=self.scene.dem.skin, dtype=self.dtype, extra_update=update,
