@@ -39,6 +39,7 @@ from drumheat.progress import SimProgress
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.composer import ThermalModel, make_thermal_model
 from drumheat.thermal.network import ContactNetwork
+from drumheat.thermal.wall import WallConduction
 from drumheat.trajectory import Trajectory
 
 
@@ -46,7 +47,8 @@ def _steps(interval: float, dt: float) -> int:
     return max(1, int(round(interval / dt)))
 
 
-def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h) -> ContactNetwork:
+def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
+                    per_wall: bool = False) -> ContactNetwork:
     """Contact network of one thermal step from accumulated contact times.
 
     Parameters
@@ -58,9 +60,13 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h) -> Co
     wall_time : array (n * n_walls,)
         Time each (particle, wall primitive) touched, s, row-major.
     wall_heated : bool array (n_walls,)
-        Primitives that exchange heat (they carry a temperature); their contacts get wall id 0.
+        Primitives that exchange heat (they carry a temperature).
     h : float
         Thermal step, s; weights are contact-time fractions ``time / h``.
+    per_wall : bool
+        False: every heated contact gets wall id 0 (one wall temperature, the drum); True: the
+        wall id is the primitive index, so that the wall effect carries one temperature per
+        primitive and the heat of each (e.g. each tube of a bundle) can be told apart.
     """
     valid = idx[0] < n
     i = jnp.where(valid, idx[0], 0)
@@ -69,30 +75,39 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h) -> Co
     wp = jnp.repeat(jnp.arange(n), n_walls)
     wk = jnp.tile(jnp.arange(n_walls), n)
     w_wall = wall_time / h * wall_heated[wk]
-    return ContactNetwork(i, j, w_pair, wp, jnp.zeros_like(wp), w_wall)
+    return ContactNetwork(i, j, w_pair, wp, wk if per_wall else jnp.zeros_like(wp), w_wall)
 
 
 def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
-                        dt: float):
+                        dt: float, per_wall: bool = False):
     """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
 
     The ``extra`` state is a dict with ``T`` (N,) K, ``Q`` {account: J}, ``k`` (steps since the
     last thermal step), ``wall_time`` and ``rec_wall_time`` (N * n_walls,) s, and
     ``pair_data`` = {"time", "rec_time"} (M,) s aligned with the neighbour pairs (the
     integrator carries ``extra["pair_data"]`` across rebuilds like the tangential springs).
+    With ``per_wall`` (see :func:`thermal_network`; the wall effect then holds one temperature
+    per primitive) it also carries ``Q_walls`` (n_walls,) J, the heat each wall primitive gave
+    to the particles (see :func:`initial_extra`).
     """
     h = substeps * dt
     heated = jnp.asarray(wall_heated, bool)
+    wall_effect = [e for e in model.effects if isinstance(e, WallConduction)]
 
     def thermal_step(extra, idx):
         net = thermal_network(idx, n, extra["pair_data"]["time"], extra["wall_time"], heated,
-                              n_walls, h)
+                              n_walls, h, per_wall)
         q, ext = model.heat_flows(extra["T"], net)
+        out = {}
+        if per_wall:
+            qw = (wall_effect[0].heat_flow_by_wall(extra["T"], model.particles, net, n_walls)
+                  if wall_effect else jnp.zeros(n_walls))
+            out["Q_walls"] = extra["Q_walls"] + h * qw
         T = extra["T"] + h * q / model.particles.capacity
-        Q = {a: extra["Q"][a] + h * ext[a] for a in extra["Q"]}
+        Q = {a: extra["Q"][a] + h * ext[a] if a in ext else extra["Q"][a] for a in extra["Q"]}
         pair = dict(extra["pair_data"], time=jnp.zeros_like(extra["pair_data"]["time"]))
         return dict(extra, T=T, Q=Q, k=jnp.zeros_like(extra["k"]), pair_data=pair,
-                    wall_time=jnp.zeros_like(extra["wall_time"]))
+                    wall_time=jnp.zeros_like(extra["wall_time"]), **out)
 
     def update(extra, state, contacts, dt_):
         pm = contacts.pair_mask.astype(jnp.float64) * dt
@@ -109,12 +124,44 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     return update
 
 
-def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int) -> dict:
-    """The thermal part of the DEM state at t = 0."""
+def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
+                  per_wall: bool = False, accounts=()) -> dict:
+    """The thermal part of the DEM state at t = 0.
+
+    ``per_wall`` adds the per-primitive heat ``Q_walls`` (n_walls,) J; ``accounts`` adds
+    further heat accounts (J, zero at t = 0) that an open boundary books into ``Q`` (e.g. the
+    enthalpy carried in by recycled particles).
+    """
     z = jnp.zeros(n * n_walls)
-    return {"T": jnp.asarray(T0, float), "Q": {a: jnp.zeros(()) for a in model.accounts},
-            "k": jnp.asarray(0, jnp.int32), "wall_time": z, "rec_wall_time": z,
-            "pair_data": {"time": jnp.zeros(capacity), "rec_time": jnp.zeros(capacity)}}
+    Q = {a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)}
+    out = {"T": jnp.asarray(T0, float), "Q": Q,
+           "k": jnp.asarray(0, jnp.int32), "wall_time": z, "rec_wall_time": z,
+           "pair_data": {"time": jnp.zeros(capacity), "rec_time": jnp.zeros(capacity)}}
+    if per_wall:
+        out["Q_walls"] = jnp.zeros(n_walls)
+    return out
+
+
+def scene_contact_params(scene: Scene, diameter):
+    """Contact parameters of the ``[dem]`` table (stiffness default ``E A_p / d_p`` of the
+    smallest particle with the softest material, weigler eq. [2.3]); returns ``(params, k_n)``.
+    """
+    cfg = scene.dem
+    value = scene_values(scene)
+    k_n = cfg.stiffness
+    if k_n is None:
+        E = min(float(group_property(scene, value, k, "youngs_modulus"))
+                for k in range(len(scene.groups)))
+        k_n = float(normal_stiffness_from_youngs(E, float(np.min(diameter))))
+    damping = {}
+    if cfg.restitution is not None:
+        damping = dict(restitution=cfg.restitution)
+    elif cfg.damping_ratio is not None:
+        damping = dict(damping_ratio=cfg.damping_ratio)
+    params = contact_params(k_n, kn_wall=cfg.wall_stiffness, friction=cfg.friction,
+                            wall_friction=cfg.wall_friction,
+                            rolling_friction=cfg.rolling_friction, **damping)
+    return params, k_n
 
 
 class DEMBed:
@@ -146,20 +193,7 @@ class DEMBed:
         R = 0.5 * scene.drum.diameter
         self.walls = [DrumShell(R, rpm=scene.drum.rpm, temperature=scene.drum.wall_temperature)]
         self.wall_heated = np.array([w.temperature is not None for w in self.walls])
-        k_n = cfg.stiffness
-        if k_n is None:
-            E = min(float(group_property(scene, value, k, "youngs_modulus"))
-                    for k in range(n_groups))
-            k_n = float(normal_stiffness_from_youngs(E, float(self.diameter.min())))
-        self.k_n = k_n
-        damping = {}
-        if cfg.restitution is not None:
-            damping = dict(restitution=cfg.restitution)
-        elif cfg.damping_ratio is not None:
-            damping = dict(damping_ratio=cfg.damping_ratio)
-        self.params = contact_params(k_n, kn_wall=cfg.wall_stiffness, friction=cfg.friction,
-                                     wall_friction=cfg.wall_friction,
-                                     rolling_friction=cfg.rolling_friction, **damping)
+        self.params, self.k_n = scene_contact_params(scene, self.diameter)
         self.mech = mechanical_particles(0.5 * self.diameter, density, group=self.group)
         self.dim = scene.dim
         self.periodic = scene.drum.depth if scene.dim == 3 else None

@@ -73,6 +73,8 @@ def temperature_bounds(scene) -> tuple[float, float]:
         Ts += [x.temperature for x in (r.surfaces or ())]
     if scene.granulator is not None:
         Ts.append(scene.granulator.wall_temperature)
+    if getattr(scene, "hopper", None) is not None:
+        Ts += [scene.hopper.tube_temperature, scene.hopper.inlet_temperature]
     return float(min(Ts)), float(max(Ts))
 
 
@@ -91,9 +93,10 @@ def _wall(scene, value: ValueFn, particles=None) -> WallConduction:
         alpha = value("heat.wall.alpha")
     else:
         alpha = _schluender(scene, value, _mean_diameter(scene))[0]
+    key = "hopper.tube_temperature" if getattr(scene, "hopper", None) is not None \
+        else "drum.wall_temperature"
     return WallConduction(alpha=jnp.asarray(alpha, float),
-                          wall_temperature=jnp.atleast_1d(jnp.asarray(
-                              value("drum.wall_temperature"), float)))
+                          wall_temperature=jnp.atleast_1d(jnp.asarray(value(key), float)))
 
 
 def _loss(scene, value: ValueFn, particles=None) -> HeatLoss:
