@@ -93,7 +93,9 @@ class ParticleFrames:
     @property
     def drum_diameter(self) -> float | None:
         """Inner drum diameter from the scene, m (None without a scene)."""
-        return None if self.scene is None else float(self.scene.drum.diameter)
+        if self.scene is None or self.scene.drum is None:
+            return None
+        return float(self.scene.drum.diameter)
 
     @classmethod
     def from_result(cls, result) -> "ParticleFrames":
@@ -242,6 +244,17 @@ def scene_walls(scene, t: float = 0.0) -> list[dict]:
     """
     if scene is None:
         return []
+    if scene.drum is None and getattr(scene, "hopper", None) is not None:
+        from drumheat.mixing.moving_bed import hopper_walls
+
+        g = hopper_walls(scene.hopper)
+        top = g.crest + scene.hopper.insertion_height
+        xw = g.half_width
+        out = [{"kind": "segment", "start": (sx * xw, scene.hopper.bottom_height),
+                "end": (sx * xw, top)} for sx in (-1.0, 1.0)]
+        return out + [wall_description(w) for w in g.walls[2:]]
+    if scene.drum is None:
+        return []
     return [{"kind": "circle", "center": (0.0, 0.0), "radius": 0.5 * float(scene.drum.diameter),
              "label": "drum shell"}]
 
@@ -285,6 +298,9 @@ def wall_description(wall, t: float = 0.0) -> dict:
     if name == "FixedCylinder":
         return {"kind": "circle", "center": tuple(map(float, np.asarray(wall.center)[:2])),
                 "radius": float(wall.radius)}
+    if name == "Segment":
+        return {"kind": "segment", "start": tuple(map(float, wall.a)),
+                "end": tuple(map(float, wall.b))}
     if name == "RadialPlate":
         phi = float(wall.angle(t))
         e = np.array([np.cos(phi), np.sin(phi)])

@@ -392,6 +392,7 @@ MOTION_MODELS = {
     "dem": "drumheat.mixing.dem:DEMBed",
     "replay": "drumheat.mixing.replay:ReplayBed",
     "pneumatic": "drumheat.mixing.pneumatic:PneumaticChannel",
+    "moving_bed": "drumheat.mixing.moving_bed:MovingBed",
 }
 
 #: Motion models whose particles lie in the drum of the ``[drum]`` table.
@@ -565,6 +566,48 @@ class ChannelConfig:
 
 
 @dataclass(frozen=True)
+class HopperConfig:
+    """``[hopper]``: hopper with a staggered bundle of horizontal tubes (motion 'moving_bed').
+
+    kraychev-tube-bundle.md sections 1, 2, 7: the solids sink through the bundle and leave
+    through a bottom slit of width S; here they re-enter at the top (recycling). Coordinates:
+    x across the bundle (hopper axis x = 0), y up (y = 0 at the slit lips), z along the tubes
+    (a 3D slice of length ``depth``, periodic in z).
+    """
+
+    slit_width: float = spec(unit="m", gt=0, doc="Outlet slit width S (4-16 mm in the source).")
+    tube_temperature: float = spec(unit="K", gt=0, doc="Temperature of all tubes (t_R,OF).")
+    inlet_temperature: float = spec(unit="K", gt=0,
+                                    doc="Temperature of the particles re-entering at the top "
+                                        "(t_1).")
+    depth: float = spec(unit="m", gt=0, doc="Length of the periodic slice along the tubes.")
+    tube_diameter: float = spec(0.014, unit="m", gt=0, doc="Tube outer diameter D_R.")
+    pitch: float = spec(0.025, unit="m", gt=0, doc="Transverse pitch s1 (in a row).")
+    row_pitch: float = spec(0.025, unit="m", gt=0, doc="Longitudinal pitch s2 (row to row).")
+    rows: int = spec(4, ge=1, doc="Number of tube rows.")
+    columns: int = spec(3, ge=1, doc="Hopper width in transverse pitches; the side walls are "
+                                     "symmetry planes of the bundle (tubes centred on them are "
+                                     "half tubes).")
+    bottom_height: float = spec(0.02, unit="m", gt=0,
+                                doc="Height of the sloped bottom: plates from the side walls at "
+                                    "this height down to the slit lips at y = 0.")
+    bundle_clearance: float = spec(0.012, unit="m", gt=0,
+                                   doc="Gap between the sloped bottom's top and the lowest "
+                                       "tubes' underside.")
+    insertion_height: float = spec(0.06, unit="m", gt=0,
+                                   doc="Bottom of the insertion band above the top tube row's "
+                                       "crest; recycled particles re-enter on sites above it.")
+    exit_depth: float = spec(0.02, unit="m", gt=0,
+                             doc="A particle whose centre falls this far below the slit has "
+                                 "left and is recycled.")
+    settle_time: float = spec(0.3, unit="s", ge=0,
+                              doc="Settling with the slit closed before t = 0.")
+    measure_from: float = spec(1.0, unit="s", ge=0,
+                               doc="Start of the window over which W_p and alpha_1 are "
+                                   "averaged (after the start-up).")
+
+
+@dataclass(frozen=True)
 class ReplayConfig:
     """``[replay]``: thermal-only replay of a recorded contact network (motion 'replay')."""
 
@@ -627,6 +670,8 @@ class Scene:
                                                             "(motion model 'granulator').")
     channel: Optional[ChannelConfig] = spec(None, doc="Pneumatic channel (motion model "
                                                       "'pneumatic').")
+    hopper: Optional[HopperConfig] = spec(None, doc="Hopper with a tube bundle (motion model "
+                                                    "'moving_bed').")
     source_path: Optional[str] = field(default=None, compare=False,
                                        metadata=dict(internal=True))
 
@@ -838,7 +883,8 @@ def _check_consistency(s: Scene) -> None:
             raise SceneError("groups", f"{s.n_particles} particles",
                              f"the particles cover {solid / drum:.0%} of the drum cross-section; "
                              "a monolayer packing holds at most about 80 %", n)
-    if s.heat.wall is not None and (s.drum is None or not s.drum.heated_surfaces()):
+    if (s.heat.wall is not None and s.hopper is None
+            and (s.drum is None or not s.drum.heated_surfaces())):
         raise SceneError("drum.wall_temperature", _MISSING_VALUE,
                          "[heat.wall] needs the wall temperature, in K", n)
     if s.drum is not None and s.drum.has_internals:
@@ -941,6 +987,8 @@ def _check_consistency(s: Scene) -> None:
         from drumheat.mixing.pneumatic import check_scene
 
         check_scene(s)
+    if s.motion.model == "moving_bed":
+        _check_hopper(s)
     if s.packing.method == "file" and s.packing.file is None:
         raise SceneError("packing.file", _MISSING_VALUE, "method 'file' needs a path to an .npz "
                          "packing", n)
@@ -948,6 +996,32 @@ def _check_consistency(s: Scene) -> None:
             and s.packing.method == "deposition"):
         raise SceneError("packing.method", "deposition", "the geometric deposition packing is "
                          "2D; a 3D bed needs packing.method = 'pour' (with [dem]) or 'file'", n)
+
+
+def _check_hopper(s: Scene) -> None:
+    """Cross-field rules of motion model 'moving_bed' (drumheat.mixing.moving_bed)."""
+    n = s.name
+    if s.hopper is None:
+        raise SceneError("hopper", _MISSING_VALUE, "motion model 'moving_bed' needs the "
+                         "[hopper] table (slit_width, tube_temperature, inlet_temperature, "
+                         "depth)", n)
+    if s.dem is None:
+        raise SceneError("dem", _MISSING_VALUE, "motion model 'moving_bed' needs the [dem] "
+                         "table (its keys all have defaults: [dem] alone is enough)", n)
+    if s.dim != 3:
+        raise SceneError("dim", s.dim, "motion model 'moving_bed' is a 3D slice along the "
+                         "tubes: dim = 3", n)
+    h = s.hopper
+    if h.tube_diameter >= h.pitch or h.tube_diameter >= 2 * h.row_pitch:
+        raise SceneError("hopper.tube_diameter", h.tube_diameter, "the tubes must not touch: "
+                         f"less than pitch = {h.pitch:g} m", n)
+    d_max = max(g.diameter for g in s.groups)
+    if h.depth < 2.5 * d_max * 1.0001:
+        raise SceneError("hopper.depth", h.depth, "the periodic slice must be at least 2.5 "
+                         f"largest particle diameters long ({2.5 * d_max:g} m)", n)
+    if h.slit_width >= h.columns * h.pitch:
+        raise SceneError("hopper.slit_width", h.slit_width, "must be narrower than the hopper "
+                         f"(columns x pitch = {h.columns * h.pitch:g} m)", n)
 
 
 def _check_new_effects(s: Scene) -> None:

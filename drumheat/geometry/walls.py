@@ -47,6 +47,7 @@ __all__ = [
     "FixedCylinder",
     "Plane",
     "Box",
+    "Segment",
     "rpm_to_omega",
     "expand_walls",
     "walls_at_rest",
@@ -338,6 +339,33 @@ class Box(Wall):
 
     def bounds(self, dim):
         return np.asarray(self.lo, dtype=float), np.asarray(self.hi, dtype=float)
+
+
+class Segment(Wall):
+    """Fixed flat plate: the segment from ``a`` to ``b`` = (x, y) in the x-y plane (in 3D
+    extended along z), of total ``thickness`` (m, 0 = zero thickness), touchable from both
+    sides and at its rounded ends.
+
+    ``dist = |q - c| - thickness/2`` with c the point of the segment closest to the in-plane
+    position q; normal ``(q - c)/|q - c|``; the plate does not move. Used for the sloped hopper
+    bottom and the lips of an outlet slit (motion model ``moving_bed``).
+    """
+
+    a: Sequence[float]
+    b: Sequence[float]
+    thickness: float = 0.0
+    temperature: Optional[float] = None
+    wall_id: int = eqx.field(static=True, default=0)
+
+    def evaluate(self, x, t):
+        dim = x.shape[-1]
+        a = jnp.asarray(self.a, dtype=x.dtype)
+        ab = jnp.asarray(self.b, dtype=x.dtype) - a
+        q = x[..., :2]
+        s = jnp.clip((q - a) @ ab / jnp.dot(ab, ab), 0.0, 1.0)
+        c = a + s[..., None] * ab
+        n_xy, r = _safe_unit(q - c)
+        return r - 0.5 * self.thickness, _embed_xy(n_xy, dim), jnp.zeros_like(x)
 
 
 def expand_walls(walls) -> tuple:

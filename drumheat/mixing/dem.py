@@ -39,6 +39,7 @@ from drumheat.progress import SimProgress
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.composer import ThermalModel, make_thermal_model
 from drumheat.thermal.network import ContactNetwork
+from drumheat.thermal.wall import WallConduction
 from drumheat.trajectory import Trajectory
 
 
@@ -110,7 +111,8 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
 
 
 def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
-                        dt: float, batch_axis: str | None = None, wall_ids=None):
+                        dt: float, batch_axis: str | None = None, wall_ids=None,
+                        per_wall: bool = False):
     """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
 
     The ``extra`` state is a dict with ``T`` (N,) K, ``Q`` {account: J}, ``k`` (steps since the
@@ -124,12 +126,19 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     runs variants with different parameters (:func:`drumheat.run_ensemble`). ``batch_axis``
     names that vmap axis: the thermal sub-step then stays a real ``lax.cond`` (all members
     count the same steps).
+
+    ``wall_ids`` (n_walls,) gives each wall primitive's wall id (see :func:`thermal_network`).
+    ``per_wall``: every primitive is its own wall (``wall_ids = 0..n_walls-1``) and ``extra``
+    also carries ``Q_walls`` (n_walls,) J, the heat each wall primitive gave to the particles
+    (see :func:`initial_extra`).
     """
     import equinox as eqx
 
     h = substeps * dt
     heated = jnp.asarray(wall_heated, bool)
     skeleton = eqx.partition(model, eqx.is_array)[1]
+    if per_wall and wall_ids is None:
+        wall_ids = np.arange(n_walls, dtype=np.int32)
 
     def model_of(extra):
         return eqx.combine(extra["model"], skeleton) if "model" in extra else model
@@ -139,11 +148,17 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
                               n_walls, h, wall_ids)
         m = model_of(extra)
         q, ext = m.heat_flows(extra["T"], net)
+        out = {}
+        if per_wall:
+            wall_effect = [e for e in m.effects if isinstance(e, WallConduction)]
+            qw = (wall_effect[0].heat_flow_by_wall(extra["T"], m.particles, net, n_walls)
+                  if wall_effect else jnp.zeros(n_walls))
+            out["Q_walls"] = extra["Q_walls"] + h * qw
         T = extra["T"] + h * q / m.particles.capacity
-        Q = {a: extra["Q"][a] + h * ext[a] for a in extra["Q"]}
+        Q = {a: extra["Q"][a] + h * ext[a] if a in ext else extra["Q"][a] for a in extra["Q"]}
         pair = dict(extra["pair_data"], time=jnp.zeros_like(extra["pair_data"]["time"]))
         return dict(extra, T=T, Q=Q, k=jnp.zeros_like(extra["k"]), pair_data=pair,
-                    wall_time=jnp.zeros_like(extra["wall_time"]))
+                    wall_time=jnp.zeros_like(extra["wall_time"]), **out)
 
     def update(extra, state, contacts, dt_):
         pm = contacts.pair_mask.astype(jnp.float64) * dt
@@ -163,12 +178,44 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     return update
 
 
-def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int) -> dict:
-    """The thermal part of the DEM state at t = 0."""
+def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
+                  per_wall: bool = False, accounts=()) -> dict:
+    """The thermal part of the DEM state at t = 0.
+
+    ``per_wall`` adds the per-primitive heat ``Q_walls`` (n_walls,) J; ``accounts`` adds
+    further heat accounts (J, zero at t = 0) that an open boundary books into ``Q`` (e.g. the
+    enthalpy carried in by recycled particles).
+    """
     z = jnp.zeros(n * n_walls)
-    return {"T": jnp.asarray(T0, float), "Q": {a: jnp.zeros(()) for a in model.accounts},
-            "k": jnp.asarray(0, jnp.int32), "wall_time": z, "rec_wall_time": z,
-            "pair_data": {"time": jnp.zeros(capacity), "rec_time": jnp.zeros(capacity)}}
+    Q = {a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)}
+    out = {"T": jnp.asarray(T0, float), "Q": Q,
+           "k": jnp.asarray(0, jnp.int32), "wall_time": z, "rec_wall_time": z,
+           "pair_data": {"time": jnp.zeros(capacity), "rec_time": jnp.zeros(capacity)}}
+    if per_wall:
+        out["Q_walls"] = jnp.zeros(n_walls)
+    return out
+
+
+def scene_contact_params(scene: Scene, diameter):
+    """Contact parameters of the ``[dem]`` table (stiffness default ``E A_p / d_p`` of the
+    smallest particle with the softest material, weigler eq. [2.3]); returns ``(params, k_n)``.
+    """
+    cfg = scene.dem
+    value = scene_values(scene)
+    k_n = cfg.stiffness
+    if k_n is None:
+        E = min(float(group_property(scene, value, k, "youngs_modulus"))
+                for k in range(len(scene.groups)))
+        k_n = float(normal_stiffness_from_youngs(E, float(np.min(diameter))))
+    damping = {}
+    if cfg.restitution is not None:
+        damping = dict(restitution=cfg.restitution)
+    elif cfg.damping_ratio is not None:
+        damping = dict(damping_ratio=cfg.damping_ratio)
+    params = contact_params(k_n, kn_wall=cfg.wall_stiffness, friction=cfg.friction,
+                            wall_friction=cfg.wall_friction,
+                            rolling_friction=cfg.rolling_friction, **damping)
+    return params, k_n
 
 
 class DEMBed:
@@ -205,20 +252,7 @@ class DEMBed:
         self.walls = drum_walls(scene)
         self.wall_heated = np.array([w.temperature is not None for w in self.walls])
         self.wall_ids = np.array([w.wall_id for w in self.walls], np.int32)
-        k_n = cfg.stiffness
-        if k_n is None:
-            E = min(float(group_property(scene, value, k, "youngs_modulus"))
-                    for k in range(n_groups))
-            k_n = float(normal_stiffness_from_youngs(E, float(self.diameter.min())))
-        self.k_n = k_n
-        damping = {}
-        if cfg.restitution is not None:
-            damping = dict(restitution=cfg.restitution)
-        elif cfg.damping_ratio is not None:
-            damping = dict(damping_ratio=cfg.damping_ratio)
-        self.params = contact_params(k_n, kn_wall=cfg.wall_stiffness, friction=cfg.friction,
-                                     wall_friction=cfg.wall_friction,
-                                     rolling_friction=cfg.rolling_friction, **damping)
+        self.params, self.k_n = scene_contact_params(scene, self.diameter)
         self.mech = mechanical_particles(0.5 * self.diameter, density, group=self.group)
         self.dim = scene.dim
         self.periodic = scene.drum.depth if scene.dim == 3 else None

@@ -73,6 +73,8 @@ def temperature_bounds(scene) -> tuple[float, float]:
         Ts += [x.temperature for x in (r.surfaces or ())]
     if scene.granulator is not None:
         Ts.append(scene.granulator.wall_temperature)
+    if getattr(scene, "hopper", None) is not None:
+        Ts += [scene.hopper.tube_temperature, scene.hopper.inlet_temperature]
     return float(min(Ts)), float(max(Ts))
 
 
@@ -91,6 +93,9 @@ def _wall(scene, value: ValueFn, particles=None) -> WallConduction:
         alpha = value("heat.wall.alpha")
     else:
         alpha = _schluender(scene, value, _mean_diameter(scene))[0]
+    if getattr(scene, "hopper", None) is not None:  # one temperature for all tubes
+        return WallConduction(alpha=jnp.asarray(alpha, float), wall_temperature=jnp.atleast_1d(
+            jnp.asarray(value("hopper.tube_temperature"), float)))
     surfaces = scene.drum.heated_surfaces()  # wall id k = surfaces[k]
     temps = jnp.stack([jnp.asarray(value(key), float) for _, key in surfaces])
     names = None if not scene.drum.has_internals else tuple(s for s, _ in surfaces)

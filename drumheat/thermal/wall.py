@@ -68,3 +68,11 @@ class WallConduction(eqx.Module):
         """Sum of wall conductances at each particle, W/K."""
         return jnp.zeros(particles.diameter.shape[0]).at[net.wall_particle].add(
             self.conductance(particles, net))
+
+    def heat_flow_by_wall(self, T: Array, particles: ThermalParticles, net: ContactNetwork,
+                          n_walls: int) -> Array:
+        """Heat flow from each wall (indexed by ``net.wall_id``) into the particles, W,
+        shape (n_walls,)."""
+        Tw = self.wall_temperature[net.wall_id]
+        q = self.conductance(particles, net) * (Tw - T[net.wall_particle])
+        return jnp.zeros(n_walls, q.dtype).at[net.wall_id].add(q)
