@@ -17,7 +17,8 @@ def dem_scene(tmp_path=None, **over):
     raw["run"].update(duration=0.2, output_interval=0.05, solver="explicit")
     raw["drum"]["rpm"] = 12.0
     raw["motion"] = {"model": "dem"}
-    raw["dem"] = {"stiffness": 2.0e4, "thermal_substeps": 1}
+    # the step counts below assume dt = 0.2 t_crit (this is about replay, not about drum flow)
+    raw["dem"] = {"stiffness": 2.0e4, "thermal_substeps": 1, "safety_factor": 0.2}
     scene = scene_from_dict(raw)
     return scene.with_overrides(over) if over else scene
 
