@@ -144,6 +144,18 @@ def _free_sites(sites, placed, r_placed, r_new, gap, periodic_length):
     return free
 
 
+def _pour_inputs(radius, density, group, ptype, walls, seed):
+    """Per-particle arrays, walls at rest, random generator and lattice spacing of a pour."""
+    r_all = np.asarray(radius, dtype=float).reshape(-1)
+    n = r_all.size
+    rho_all = np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
+    grp = np.zeros(n, int) if group is None else np.asarray(group, int).reshape(-1)
+    pt = np.zeros(n, int) if ptype is None else np.asarray(ptype, int).reshape(-1)
+    r_max = float(r_all.max())
+    return (r_all, rho_all, grp, pt, walls_at_rest(walls), np.random.default_rng(seed), r_max,
+            2.2 * r_max)
+
+
 def pour(radius, density, walls, params, *, dim, group=None, ptype=None, layered=True,
          periodic_length=None, bounds=None, gravity=None, seed=0, dt=None,
          safety_factor=0.2, ke_tol=1e-4, min_time=0.05, max_time=5.0, chunk=2000,
@@ -162,15 +174,9 @@ def pour(radius, density, walls, params, *, dim, group=None, ptype=None, layered
     Returns:
       :class:`Packing` with the settled positions, in the input particle order.
     """
-    r_all = np.asarray(radius, dtype=float).reshape(-1)
+    r_all, rho_all, grp, pt, walls_rest, rng, r_max, spacing = _pour_inputs(
+        radius, density, group, ptype, walls, seed)
     n = r_all.size
-    rho_all = np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
-    grp = np.zeros(n, int) if group is None else np.asarray(group, int).reshape(-1)
-    pt = np.zeros(n, int) if ptype is None else np.asarray(ptype, int).reshape(-1)
-    walls_rest = walls_at_rest(walls)
-    rng = np.random.default_rng(seed)
-    r_max = float(r_all.max())
-    spacing = 2.2 * r_max
     sites = insertion_sites(walls_rest, dim, spacing, 1.05 * r_max, bounds, periodic_length)
     sites = sites[np.argsort(sites[:, 1], kind="stable")]  # lowest first
     if layered:
@@ -244,15 +250,9 @@ def pour_sections(radius, density, walls, params, *, n_sections, phase, dim, gro
     herz-sectional-drum.md section 1), e.g. near the angle of repose to shorten a warm-up.
     The settling stops at ``max_time`` (default 0.5 s) at the latest.
     """
-    r_all = np.asarray(radius, dtype=float).reshape(-1)
+    r_all, rho_all, grp, pt, walls_rest, rng, r_max, spacing = _pour_inputs(
+        radius, density, group, ptype, walls, seed)
     n = r_all.size
-    rho_all = np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
-    grp = np.zeros(n, int) if group is None else np.asarray(group, int).reshape(-1)
-    pt = np.zeros(n, int) if ptype is None else np.asarray(ptype, int).reshape(-1)
-    walls_rest = walls_at_rest(walls)
-    rng = np.random.default_rng(seed)
-    r_max = float(r_all.max())
-    spacing = 2.2 * r_max
     sites = insertion_sites(walls_rest, dim, spacing, 1.05 * r_max, None, periodic_length)
     sec = section_of(sites[:, :2], n_sections, phase)
     order = np.argsort(grp, kind="stable") if layered else rng.permutation(n)
