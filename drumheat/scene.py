@@ -883,7 +883,7 @@ def _check_consistency(s: Scene) -> None:
             raise SceneError("groups", f"{s.n_particles} particles",
                              f"the particles cover {solid / drum:.0%} of the drum cross-section; "
                              "a monolayer packing holds at most about 80 %", n)
-    if (s.heat.wall is not None and s.hopper is None
+    if (s.heat.wall is not None and s.motion.model != "moving_bed"  # tubes: [hopper]
             and (s.drum is None or not s.drum.heated_surfaces())):
         raise SceneError("drum.wall_temperature", _MISSING_VALUE,
                          "[heat.wall] needs the wall temperature, in K", n)
@@ -998,19 +998,27 @@ def _check_consistency(s: Scene) -> None:
                          "2D; a 3D bed needs packing.method = 'pour' (with [dem]) or 'file'", n)
 
 
+def check_apparatus_tables(s: Scene, table: str, keys: str, what: str) -> None:
+    """Common rules of the DEM apparatus models (``moving_bed``, ``pneumatic``): their own
+    table ``[table]`` (required ``keys`` named in the message) and ``[dem]`` must be present,
+    and the scene is a 3D slice (``what`` says of what)."""
+    n, model = s.name, s.motion.model
+    if getattr(s, table) is None:
+        raise SceneError(table, _MISSING_VALUE, f"motion model '{model}' needs the [{table}] "
+                         f"table ({keys})", n)
+    if s.dem is None:
+        raise SceneError("dem", _MISSING_VALUE, f"motion model '{model}' needs the [dem] "
+                         "table (its keys all have defaults: [dem] alone is enough)", n)
+    if s.dim != 3:
+        raise SceneError("dim", s.dim, f"motion model '{model}' simulates a 3D slice {what}; "
+                         "use dim = 3", n)
+
+
 def _check_hopper(s: Scene) -> None:
     """Cross-field rules of motion model 'moving_bed' (drumheat.mixing.moving_bed)."""
     n = s.name
-    if s.hopper is None:
-        raise SceneError("hopper", _MISSING_VALUE, "motion model 'moving_bed' needs the "
-                         "[hopper] table (slit_width, tube_temperature, inlet_temperature, "
-                         "depth)", n)
-    if s.dem is None:
-        raise SceneError("dem", _MISSING_VALUE, "motion model 'moving_bed' needs the [dem] "
-                         "table (its keys all have defaults: [dem] alone is enough)", n)
-    if s.dim != 3:
-        raise SceneError("dim", s.dim, "motion model 'moving_bed' is a 3D slice along the "
-                         "tubes: dim = 3", n)
+    check_apparatus_tables(s, "hopper", "slit_width, tube_temperature, inlet_temperature, "
+                           "depth", "along the tubes")
     h = s.hopper
     if h.tube_diameter >= h.pitch or h.tube_diameter >= 2 * h.row_pitch:
         raise SceneError("hopper.tube_diameter", h.tube_diameter, "the tubes must not touch: "

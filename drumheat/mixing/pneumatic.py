@@ -104,19 +104,14 @@ _MISSING = "a table"
 
 def check_scene(s: Scene) -> None:
     """Cross-field rules of motion model 'pneumatic' (called by the scene validation)."""
+    from drumheat.scene import check_apparatus_tables
+
     n = s.name
-    if s.channel is None:
-        raise SceneError("channel", None, "motion model 'pneumatic' needs the [channel] table "
-                         "(height, gap, depth, length, gas_velocity, solids_mass_flow)", n)
-    if s.dem is None:
-        raise SceneError("dem", None, "motion model 'pneumatic' needs the [dem] table (its "
-                         "keys all have defaults: [dem] alone is enough)", n)
+    check_apparatus_tables(s, "channel", "height, gap, depth, length, gas_velocity, "
+                           "solids_mass_flow", "of the channel")
     if s.gas is None:
         raise SceneError("gas.temperature", None, "motion model 'pneumatic' needs the gas inlet "
                          "temperature [gas] temperature, in K", n)
-    if s.dim != 3:
-        raise SceneError("dim", s.dim, "motion model 'pneumatic' simulates a 3D channel slice; "
-                         "use dim = 3", n)
     for eff in ("contact", "wall", "loss", "radiation", "internal"):
         if getattr(s.heat, eff) is not None:
             raise SceneError(f"heat.{eff}", _MISSING, "motion model 'pneumatic' exchanges heat "
