@@ -83,9 +83,9 @@ import numpy as np
 from drumheat.bed import group_index, group_property, make_particles, output_times, scene_values
 from drumheat.geometry.walls import Plane
 from drumheat.materials import gas as gas_lib
-from drumheat.mechanics import contact_params, make_dem
+from drumheat.mechanics import make_dem
 from drumheat.mechanics import make_particles as mechanical_particles
-from drumheat.mechanics.contact_forces import normal_stiffness_from_youngs
+from drumheat.mixing.dem import scene_contact_params
 from drumheat.models import drag as drag_model
 from drumheat.models import moving_bed
 from drumheat.progress import SimProgress
@@ -307,19 +307,7 @@ class PneumaticChannel:
         self.W_gas = self.m_gas * self.cp_gas
         self.m_solids = ch.solids_mass_flow * self.D / ch.length  # kg/s into the slice
         # mechanics
-        k_n = cfg.stiffness
-        if k_n is None:
-            E = min(float(group_property(scene, value, k, "youngs_modulus"))
-                    for k in range(n_groups))
-            k_n = float(normal_stiffness_from_youngs(E, float(self.diameter.min())))
-        damping = {}
-        if cfg.restitution is not None:
-            damping = dict(restitution=cfg.restitution)
-        elif cfg.damping_ratio is not None:
-            damping = dict(damping_ratio=cfg.damping_ratio)
-        self.params = contact_params(k_n, kn_wall=cfg.wall_stiffness, friction=cfg.friction,
-                                     wall_friction=cfg.wall_friction,
-                                     rolling_friction=cfg.rolling_friction, **damping)
+        self.params, self.k_n = scene_contact_params(scene, self.diameter)
         self.mech = mechanical_particles(self.radius, self.density, group=self.group)
         self.walls = (Plane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), wall_id=0),
                       Plane((self.gap, 0.0, 0.0), (-1.0, 0.0, 0.0), wall_id=1))

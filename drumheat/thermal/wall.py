@@ -47,7 +47,7 @@ class WallConduction(eqx.Module):
         """Heat flow from each wall (W, by account) from the per-slot flows ``q_slots``."""
         if self.surfaces is None:
             return {"wall": jnp.sum(q_slots)}
-        per = jnp.zeros(len(self.surfaces), q_slots.dtype).at[net.wall_id].add(q_slots)
+        per = _per_wall(q_slots, net, len(self.surfaces))
         return {a: per[k] for k, a in enumerate(self.accounts)}
 
     def slot_flows(self, T: Array, particles: ThermalParticles, net: ContactNetwork) -> Array:
@@ -73,6 +73,9 @@ class WallConduction(eqx.Module):
                           n_walls: int) -> Array:
         """Heat flow from each wall (indexed by ``net.wall_id``) into the particles, W,
         shape (n_walls,)."""
-        Tw = self.wall_temperature[net.wall_id]
-        q = self.conductance(particles, net) * (Tw - T[net.wall_particle])
-        return jnp.zeros(n_walls, q.dtype).at[net.wall_id].add(q)
+        return _per_wall(self.slot_flows(T, particles, net), net, n_walls)
+
+
+def _per_wall(q_slots: Array, net: ContactNetwork, n_walls: int) -> Array:
+    """Sum of the per-slot heat flows of each wall id, W, shape (n_walls,)."""
+    return jnp.zeros(n_walls, q_slots.dtype).at[net.wall_id].add(q_slots)
