@@ -120,21 +120,25 @@ def explain(scene) -> Advice:
                          "fluidized); this motion model couples its gas itself and reports its "
                          "heat balance in the result files", scene.name)
     model, _ = motion.model()
-    net = motion.net
     eff = {type(e).__name__: e for e in model.effects}
     Tg = scene.gas.temperature if scene.gas is not None else None
     T_wall = scene.drum.wall_temperature if scene.drum is not None else None
+    moving_bed = scene.motion.model == "moving_bed"
+    if moving_bed:
+        T_wall = scene.hopper.tube_temperature
     terms = []
 
     # contact conduction
     drum_bed = scene.motion.model in ("static", "random")
+    wall_note = ""
     if drum_bed:
+        net = motion.net
         z = 2.0 * float(np.sum(np.asarray(net.pair_weight))) / N
         frac_wall = float(np.sum(np.asarray(net.wall_weight))) / N
     else:
         z = 0.0 if scene.motion.model in ("granulator", "fluidized") else (4.0 if scene.dim == 2
                                                                            else 6.0)
-        frac_wall = 0.0
+        frac_wall, wall_note = _wall_layer_fraction(scene, d)
     if "ContactConduction" in eff:
         alpha_pp = float(np.asarray(eff["ContactConduction"].alpha))
     else:
@@ -168,14 +172,22 @@ def explain(scene) -> Advice:
             else _schluender_alpha(scene, d)[0]
         terms.append(Term("wall contact", "[heat.wall]", scene.heat.wall is not None,
                           alpha_wp * A_p * frac_wall, (T_wall or T0) - T0,
-                          f"{frac_wall:.1%} of the particles touch the wall, alpha_wp = "
+                          f"{frac_wall:.1%} of the particles touch the "
+                          f"{'tubes' if moving_bed else 'wall'}{wall_note}, alpha_wp = "
                           f"{alpha_wp:.3g} W/(m2 K)"))
     # heat loss
     if scene.heat.loss is not None:
         terms.append(Term("heat loss (lumped)", "[heat.loss]", True, scene.heat.loss.alphaA,
                           Tg - T0, "lumps convection, radiation and losses through the drum"))
     # convection
-    if Tg is not None:
+    if moving_bed:
+        # kraychev-tube-bundle.md sec. 5: no secondary gas (W_SG = 0) -- the gas in the voids
+        # moves with the bed, it is no sink at a fixed temperature; its conduction near the
+        # contacts is part of the Schluender coefficients
+        terms.append(Term("convection", "[heat.convection]", scene.heat.convection is not None,
+                          0.0, 0.0, "no gas flows through the moving bed (no secondary gas): "
+                          "the gas in the voids moves with the particles"))
+    elif Tg is not None:
         if "Convection" in eff or "PlugFlowConvection" in eff:
             conv = eff.get("Convection") or eff["PlugFlowConvection"].convection
             import jax.numpy as jnp
@@ -202,9 +214,12 @@ def explain(scene) -> Advice:
         e = eps
         # in a drum bed only the particles at the wall and at the free surface see the
         # surroundings (about twice the wall-contact fraction); elsewhere an upper bound
-        seen = min(1.0, 2.0 * frac_wall) if drum_bed else 1.0
+        # (a hopper: only the particles at the tubes see a surface at another temperature)
+        seen = (min(1.0, 2.0 * frac_wall) if drum_bed or (scene.motion.model == "dem"
+                                                           and frac_wall > 0)
+                else frac_wall if moving_bed else 1.0)
         note = (f"estimate: black surrounding at {Tr:.1f} K, eps = {e:.2g}, "
-                + (f"{seen:.0%} of the particles see it" if drum_bed else
+                + (f"{seen:.0%} of the particles see it" if seen < 1.0 else
                    "every particle sees it (upper bound)"))
     h_r = e * SIGMA * (T0**2 + Tr**2) * (T0 + Tr)
     terms.append(Term("radiation", "[heat.radiation]", scene.heat.radiation is not None,
@@ -267,6 +282,69 @@ def explain(scene) -> Advice:
             + (f", gas {Tg:.2f} K" if Tg is not None else "")
             + (f", wall {T_wall:.2f} K" if T_wall is not None else ""))
     return Advice(scene.name, cond, terms, Bi, verdict)
+
+
+def _wall_layer_fraction(scene, d):
+    """Fraction of the particles in the layer at the heated walls (estimate), and a note.
+
+    The wall layer holds the particles within one diameter of the wetted wall at the bed's
+    solids fraction (0.6 in 3D, an area fraction of 0.8 for a 2D monolayer); an upper bound of
+    those that touch it.
+
+    * plain drum (``dem``, ``replay``, ``mixing``): the bed is a circular segment of the drum's
+      cross-section with the particles' area; its wetted arc ``2 eps R`` follows from the
+      filling degree ``f = (2 eps - sin 2 eps) / (2 pi)`` (herz-sectional-drum.md sec. 2 at
+      ``R2 = 0``);
+    * sectional drum: the revolution means of the contact lengths ``Wo + Wi + P1 + P2`` of the
+      sectional-drum model (herz-sectional-drum.md sec. 5), per section, times the sections;
+    * moving bed (``[hopper]``): the tube surface in the slice (kraychev-tube-bundle.md eq.
+      5-15 area).
+    Returns ``(0, "")`` where no wall applies (granulator, fluidized bed, pneumatic channel).
+    """
+    N = scene.n_particles
+    dim = scene.dim
+    vol = sum(g.count * math.pi * g.diameter**3 / 6 for g in scene.groups)
+    area_p = sum(g.count * math.pi * g.diameter**2 / 4 for g in scene.groups)
+    beta, phi2 = 0.6, 0.8
+    if scene.motion.model == "moving_bed":
+        from drumheat.mixing.moving_bed import hopper_walls
+
+        h = scene.hopper
+        g = hopper_walls(h)
+        A = float(np.sum(g.tube_fraction)) * math.pi * h.tube_diameter * h.depth
+        return min(1.0, A * d * beta / (math.pi * d**3 / 6) / N), " (tube surface x one layer)"
+    dr = scene.drum
+    if dr is None or scene.motion.model in ("granulator", "fluidized", "pneumatic"):
+        return 0.0, ""
+    R = 0.5 * dr.diameter
+    if dim == 3:
+        if not dr.depth:
+            return 0.0, ""
+        bed_area, per_length = vol / (beta * dr.depth), dr.depth * d * beta / (math.pi * d**3 / 6)
+    else:
+        bed_area, per_length = area_p / phi2, 1.0 / d
+    if dr.sections:
+        from drumheat.models.sectional_drum import cycle_means
+
+        R2 = 0.5 * (dr.inner_diameter or 0.0)
+        sec_area = (math.pi * (R * R - R2 * R2)) / dr.sections
+        fill = min(0.95, bed_area / dr.sections / sec_area)
+        gamma = scene.packing.surface_angle if scene.packing.surface_angle is not None else 30.0
+        m = cycle_means(R1=R, R2=R2, fill=fill, gamma_deg=abs(gamma),
+                        alpha_deg=360.0 / dr.sections)
+        length = m["all_walls"] * dr.sections
+        note = (f" (sectional-drum model: {fill:.0%} per section, revolution mean of the "
+                "wetted walls and plates x one layer)")
+    else:
+        fill = min(0.99, bed_area / (math.pi * R * R))
+        lo, hi = 0.0, math.pi  # (2 eps - sin 2 eps) / (2 pi) grows from 0 to 1
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if (2 * mid - math.sin(2 * mid)) / (2 * math.pi) < fill else (lo,
+                                                                                          mid)
+        length = 2.0 * lo * R
+        note = f" (bed segment {fill:.0%} of the drum: wetted arc x one layer)"
+    return min(1.0, length * per_length / N), note
 
 
 def _schluender_alpha(scene, d):

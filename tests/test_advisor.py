@@ -37,3 +37,40 @@ def test_cli_explain(capsys):
     out = capsys.readouterr().out
     assert "contact conduction" in out and "Biot number" in out
     assert main(["explain", "no-such-scene"]) == 2
+
+
+def test_wall_layer_of_a_plain_drum_matches_the_segment_geometry():
+    """DEM drum scenes (no contact network at t = 0) get the wall layer of their bed segment."""
+    import math
+
+    from drumheat.advisor import _wall_layer_fraction
+    from drumheat.scene import load_scene
+
+    scene = load_scene("weigler-glass-drum-9.55")
+    frac, note = _wall_layer_fraction(scene, scene.groups[0].diameter)
+    # half-filled 2D drum (f = 1/2): eps = pi/2, wetted arc pi R, arc/d particles in the layer
+    R, d = 0.5 * scene.drum.diameter, scene.groups[0].diameter
+    n_half = 0.8 * math.pi * R * R / 2 / (math.pi * d * d / 4)  # particles that half-fill it
+    half = load_scene("weigler-glass-drum-9.55", {"groups.0.count": int(round(n_half))})
+    f_half, _ = _wall_layer_fraction(half, d)
+    assert f_half * half.n_particles == pytest.approx(math.pi * R / d, rel=2e-3)
+    assert 0 < frac < 1 and "segment" in note
+    adv = explain(scene)  # used to fail: a DEM bed has no contact network at t = 0
+    terms = {t.name: t for t in adv.terms}
+    assert terms["wall contact"].conductance > 0 and terms["wall contact"].dT == pytest.approx(50.0)
+
+
+def test_moving_bed_heat_comes_from_the_tubes_not_the_gas():
+    adv = explain("kraychev-tube-bundle")
+    terms = {t.name: t for t in adv.terms}
+    wall = terms["wall contact"]
+    assert wall.dT == pytest.approx(291.15 - 258.15) and wall.verdict == "keep"
+    assert "tubes" in wall.note
+    assert terms["convection"].conductance == 0  # no secondary gas through the bed
+    assert terms["convection"].verdict.startswith("negligible")
+
+
+@pytest.mark.parametrize("name", ["herz-sectional-drum", "weigler-mixed"])
+def test_every_dem_scene_can_be_explained(name):
+    adv = explain(name)
+    assert adv.terms[0].name == "contact conduction" and adv.terms[0].conductance > 0
