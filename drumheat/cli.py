@@ -116,28 +116,14 @@ def _fail(message: str) -> int:
     return 2
 
 
-def enable_compilation_cache() -> str:
-    """Use JAX's persistent compilation cache so a second run skips most compilation.
-
-    The folder is ``$DRUMHEAT_CACHE_DIR`` or ``~/.cache/drumheat/jax``; returns it.
-    """
-    import os
-
-    import jax
-
-    cache = os.environ.get("DRUMHEAT_CACHE_DIR") or os.path.join(
-        os.path.expanduser("~"), ".cache", "drumheat", "jax")
-    jax.config.update("jax_compilation_cache_dir", cache)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
-    return cache
-
-
 def main(argv=None) -> int:
     """Entry point of the ``drumheat`` command; returns the exit code."""
     from drumheat.scene import SceneError
 
     args = build_parser().parse_args(argv)
     if args.command == "run":
+        from drumheat.compile_cache import enable_compilation_cache
+
         enable_compilation_cache()
     try:
         return args.func(args)

@@ -279,8 +279,13 @@ def run_ensemble(scene: Scene | str, overrides, *, devices=None, progress: bool 
     The ``static`` and ``dem`` motion models are vmapped (see the module docstring for what
     may vary and why the others are not); ``docs/scaling.md`` has the measured speed-ups.
     DEM trajectories are chaotic, so a vmapped DEM variant agrees with its single run to
-    round-off only over the first steps, statistically afterwards.
+    round-off only over the first steps, statistically afterwards. The batched programs are
+    kept in JAX's persistent compilation cache (:mod:`drumheat.compile_cache`): a second
+    ensemble of the same structure does not compile again.
     """
+    from drumheat.compile_cache import enable_compilation_cache
+
+    enable_compilation_cache()
     variants = expand_overrides(overrides)
     start = time.perf_counter()
     if isinstance(scene, Scene):

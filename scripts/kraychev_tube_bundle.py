@@ -9,7 +9,8 @@ top tubes (:func:`drumheat.mixing.moving_bed.particles_to_fill`), and the run is
 
 * ``W_p`` DEM on the hopper axis (the digest's definition, section 7) and from the slit
   discharge in the form of eq. (8-5), against eq. (5-5) (``discharge_velocity``, W_SG = 0);
-* ``alpha_1 = Q_tubes / (A_tubes dt_ln)`` (5-14, 5-15) against eq. (5-18) via
+* ``alpha_1 = Q_tubes / (A_tubes dt_ln)`` (5-14, 5-15), and the same with the heat the solids carry
+  out, ``Q_M1 = m_dot c (t_2 - t_1)`` (equal in a steady state), against eq. (5-18) via
   ``alpha_tube_bundle`` with Pe* from the simulated W_p (axis).
 
 Usage::
@@ -111,7 +112,7 @@ def report(out: Path) -> None:
     rows.sort(key=lambda r: (r["material"], r["S"], r["depth"] / r["d_p"]))
     head = ("| material | d_p [mm] | S [mm] | S/d_p | depth/d_p | N | W_p DEM axis [m/s] | "
             "W_p DEM slit (8-5) [m/s] | W_p eq. 5-5 [m/s] | alpha_1 DEM [W/(m2 K)] | "
-            "alpha_1 eq. 5-18 [W/(m2 K)] | "
+            "alpha_1 DEM from Q_M1 [W/(m2 K)] | alpha_1 eq. 5-18 [W/(m2 K)] | "
             "Pe* | Q_M1/Q_tubes | W_p axis 1st/2nd half | alpha_1 1st/2nd half | "
             "waiting | max overlap/r | wall time [s] |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
@@ -124,7 +125,8 @@ def report(out: Path) -> None:
             f"| {r['material']} | {r['d_p'] * 1e3:.2f} | {r['S'] * 1e3:.0f} | "
             f"{r['S_over_dp']:.2f} | {r['depth'] / r['d_p']:.1f} | {r['n_particles']} | "
             f"{r['W_p_axis']:.3f} | {r['W_p_slit']:.3f} | "
-            f"{r['W_p_eq55']:.3f} | {r['alpha_1']:.1f} | {r['alpha_corr']:.1f} | "
+            f"{r['W_p_eq55']:.3f} | {r['alpha_1']:.1f} | {r['alpha_1'] * ratio:.1f} | "
+            f"{r['alpha_corr']:.1f} | "
             f"{r['Pe_star']:.0f} | {ratio:.2f} | {f.get('W_p_axis', np.nan):.3f} / "
             f"{s.get('W_p_axis', np.nan):.3f} | {f.get('alpha_1', np.nan):.1f} / "
             f"{s.get('alpha_1', np.nan):.1f} | "
@@ -163,7 +165,10 @@ def report(out: Path) -> None:
         ax[0].plot([r["S_over_dp"] for r in rs], [r["W_p_slit"] for r in rs], "s", mfc="none",
                    color=c, label=f"{name} DEM, slit flow (8-5)")
         ax[1].plot([r["S_over_dp"] for r in rs], [r["alpha_1"] for r in rs], "o", color=c,
-                   label=f"{name} DEM")
+                   label=f"{name} DEM (Q tubes)")
+        ax[1].plot([r["S_over_dp"] for r in rs],
+                   [r["alpha_1"] * r["Q_M1"] / r["Q_tubes"] if r["Q_tubes"] else np.nan
+                    for r in rs], "o", mfc="none", color=c, label=f"{name} DEM (Q_M1 carried out)")
         ax[1].plot([r["S_over_dp"] for r in rs], [r["alpha_corr"] for r in rs], "x--", color=c,
                    label=f"{name} eq. (5-18), Pe* from DEM W_p")
         for r in rs:

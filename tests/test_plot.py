@@ -18,9 +18,6 @@ from drumheat import plot  # noqa: E402
 
 @pytest.fixture(scope="module")
 def static():
-    from drumheat.cli import enable_compilation_cache
-
-    enable_compilation_cache()
     return dh.run("weigler-static", overrides={"run.duration": 120.0}, progress=False)
 
 
