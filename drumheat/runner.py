@@ -119,6 +119,10 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         params: dict | None = None, overrides: dict | None = None, devices=None) -> Result:
     """Run a scene and return its :class:`Result`; write result files if ``out`` is given.
 
+    Compiled programs are kept in JAX's persistent compilation cache
+    (:mod:`drumheat.compile_cache`; ``DRUMHEAT_CACHE_DIR=off`` leaves it alone), so running
+    the same scene again does not compile again.
+
     Parameters
     ----------
     scene : Scene or str
@@ -141,10 +145,6 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         N = 10 000 and over 100x slower at N = 2 000 than on one (docs/scaling.md). For
         many variants of a scene use :func:`drumheat.run_ensemble`, which splits the
         variants over the devices instead.
-
-    Compiled programs are kept in JAX's persistent compilation cache
-    (:mod:`drumheat.compile_cache`; ``DRUMHEAT_CACHE_DIR=off`` leaves it alone), so running
-    the same scene again does not compile again.
     """
     from drumheat.compile_cache import enable_compilation_cache
 
