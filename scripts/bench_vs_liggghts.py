@@ -22,7 +22,9 @@ Procedure for each N:
    temperatures updated in the same jitted loop (``extra_update``) by the LIGGGHTS conduction
    law ``q_ij = 4 k_i k_j / (k_i + k_j) sqrt(A_c) (T_j - T_i)`` with the overlap-circle area
    A_c; ``nwarm`` steps (compilation included) then ``steps`` timed steps via
-   :meth:`DEM.run` (chunked, with the overflow / NaN / escape checks).
+   :meth:`DEM.run` (chunked, with the overflow / NaN / escape checks). Twice: with the JAX pair
+   kernel (the default, every backend) and with the C++ pair loop
+   (``make_dem(pair_kernel="cpu")``, :mod:`drumheat.mechanics.cpu_kernel`) where it can be built.
 
 Output: a table N x code x ranks with particle-steps/s and the ratio to drumheat (and the
 machine load seen before each timing; the machine has 2 shared cores, so compare only rows
@@ -50,7 +52,7 @@ import numpy as np
 
 import drumheat  # noqa: F401  (x64 for the temperatures)
 from drumheat.geometry import DrumShell
-from drumheat.mechanics import contact_params, make_dem, make_particles
+from drumheat.mechanics import contact_params, cpu_kernel, make_dem, make_particles
 
 PEERS = Path(__file__).resolve().parents[1].parent / "shared" / "peers" / "liggghts"
 if not PEERS.exists():  # a checkout elsewhere
@@ -160,7 +162,7 @@ def conduction(n, radius, mc):
     return update
 
 
-def drumheat_setup(dat, thermal):
+def drumheat_setup(dat, thermal, pair_kernel="jax"):
     pos, vel, omega, radius, L = read_data(dat)
     n = len(pos)
     part = make_particles(radius, RHO)
@@ -169,7 +171,7 @@ def drumheat_setup(dat, thermal):
     mc = jnp.asarray(np.asarray(part.mass) * C_P)
     upd = conduction(n, radius, mc) if thermal else None
     dem = make_dem(part, [DrumShell(R_DRUM, rpm=RPM)], params, dim=3, periodic_length=L, dt=DT,
-                   skin=SKIN, dtype=jnp.float32, extra_update=upd)
+                   skin=SKIN, dtype=jnp.float32, extra_update=upd, pair_kernel=pair_kernel)
     T = None
     if thermal:  # a temperature gradient across the bed so that heat actually flows
         T = jnp.asarray(T0 + 50.0 * (pos[:, 0] - pos[:, 0].min()) / np.ptp(pos[:, 0]),
@@ -178,8 +180,8 @@ def drumheat_setup(dat, thermal):
     return dem, state
 
 
-def time_drumheat(dat, steps, warm, thermal):
-    dem, state = drumheat_setup(dat, thermal)
+def time_drumheat(dat, steps, warm, thermal, pair_kernel="jax"):
+    dem, state = drumheat_setup(dat, thermal, pair_kernel)
     n = dem.particles.n
     t0 = time.perf_counter()
     state = dem.run(state, warm, chunk=warm)  # compiles; builds the tangential history
@@ -230,6 +232,9 @@ def main():
                     help="s per LIGGGHTS preparation call (N = 1e4 needs an idle machine "
                          "to stay below the default 300 s)")
     ap.add_argument("--no-liggghts", action="store_true", help="time drumheat only")
+    ap.add_argument("--pair-kernel", nargs="+", default=["jax", "cpu"], choices=["jax", "cpu"],
+                    help="drumheat pair kernels to time: the JAX kernel and/or the C++ loop "
+                         "(make_dem(pair_kernel='cpu'), where it is available)")
     args = ap.parse_args()
     sizes = [2000] if args.quick else args.n
     have_lig = shutil.which("liggghts") is not None and shutil.which("mpirun") is not None
@@ -259,10 +264,15 @@ def main():
             if not dat.exists():
                 print(f"  no packing for N = {n} in {work}; skipped")
                 continue
-        r = time_drumheat(dat, steps, warm, thermal)
-        rows.append((n, "drumheat", "-", steps, r))
-        print(f"  N={n} drumheat: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
-              f"{r['load']:.2f}, rebuilds {r['rebuilds']}) {r['note']}", flush=True)
+        for kernel in args.pair_kernel:
+            if kernel == "cpu" and not cpu_kernel.available()[0]:
+                print(f"  C++ pair kernel unavailable: {cpu_kernel.available()[1]}")
+                continue
+            r = time_drumheat(dat, steps, warm, thermal, kernel)
+            code = f"drumheat ({'JAX' if kernel == 'jax' else 'C++'} pair kernel)"
+            rows.append((n, code, "-", steps, r))
+            print(f"  N={n} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
+                  f"{r['load']:.2f}, rebuilds {r['rebuilds']}) {r['note']}", flush=True)
         if have_lig and not args.no_liggghts:
             for k in args.ranks:
                 r = time_liggghts(rst, work, n, steps, warm, k, args.thermal)
@@ -274,7 +284,7 @@ def main():
           "| load before |")
     print("|---|---|---|---|---|---|---|---|")
     for n, code, ranks, steps, r in rows:
-        ref = next(x[4]["rate"] for x in rows if x[0] == n and x[1] == "drumheat")
+        ref = next(x[4]["rate"] for x in rows if x[0] == n and x[1].startswith("drumheat"))
         print(f"| {n} | {code} | {ranks} | {steps} | {r['wall']:.2f} | {r['rate']:.3g} | "
               f"{r['rate'] / ref:.2f} | {r['load']:.2f} |")
 
