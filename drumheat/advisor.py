@@ -215,9 +215,12 @@ def explain(scene) -> Advice:
         # in a drum bed only the particles at the wall and at the free surface see the
         # surroundings (about twice the wall-contact fraction); elsewhere an upper bound
         # (a hopper: only the particles at the tubes see a surface at another temperature)
-        seen = (min(1.0, 2.0 * frac_wall) if drum_bed or (scene.motion.model == "dem"
-                                                           and frac_wall > 0)
-                else frac_wall if moving_bed else 1.0)
+        if moving_bed:
+            seen = frac_wall
+        elif drum_bed or frac_wall > 0:
+            seen = min(1.0, 2.0 * frac_wall)
+        else:
+            seen = 1.0
         note = (f"estimate: black surrounding at {Tr:.1f} K, eps = {e:.2g}, "
                 + (f"{seen:.0%} of the particles see it" if seen < 1.0 else
                    "every particle sees it (upper bound)"))

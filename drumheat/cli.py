@@ -121,10 +121,6 @@ def main(argv=None) -> int:
     from drumheat.scene import SceneError
 
     args = build_parser().parse_args(argv)
-    if args.command == "run":
-        from drumheat.compile_cache import enable_compilation_cache
-
-        enable_compilation_cache()
     try:
         return args.func(args)
     except SceneError as err:

@@ -41,10 +41,10 @@ _LOADED = False
 
 
 def _cache_dir() -> Path:
-    env = os.environ.get("DRUMHEAT_CACHE_DIR")
-    base = (Path(env) if env and env.strip().lower() not in ("off", "0", "none", "false")
-            else Path.home() / ".cache" / "drumheat")
-    return base / "kernels"
+    from drumheat.compile_cache import cache_dir_setting
+
+    env = cache_dir_setting()  # a compiled kernel needs a folder even with the JAX cache off
+    return (Path(env) if env else Path.home() / ".cache" / "drumheat") / "kernels"
 
 
 def available() -> tuple[bool, str]:

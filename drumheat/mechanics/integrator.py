@@ -631,9 +631,8 @@ def make_dem(
         return tab[ptype]
 
     if use_cpu_kernel:
-        cpu_params = {name: float(np.asarray(getattr(params, f"{field}_pp"))[0, 0])
-                      for name, field in (("kn", "kn"), ("kt", "kt"), ("zeta_n", "zeta_n"),
-                                          ("zeta_t", "zeta_t"), ("mu", "mu"))}
+        cpu_params = {k: float(np.asarray(getattr(params, f"{k}_pp"))[0, 0])
+                      for k in ("kn", "kt", "zeta_n", "zeta_t", "mu")}
         cpu_params["dt"] = float(dt)
 
     def forces(pos, vel, w, t, nbrs, pair_spring, wall_spring, vel_h=None, w_h=None):

@@ -448,8 +448,9 @@ class PneumaticChannel:
             act = extra["active"]
             T = extra["T"]
             k, Tg = gas_at(extra, pos[:, 1])
-            rho, cp, lam, nu = props(0.5 * (T + Tg) if film else Tg)
-            u = G_flux / props(Tg)[0]
+            gas = props(Tg)
+            rho, cp, lam, nu = props(0.5 * (T + Tg)) if film else gas
+            u = G_flux / gas[0]
             u_rel = jnp.stack([-vel[:, 0], u - vel[:, 1], -vel[:, 2]], axis=1)
             slip = jnp.sqrt(jnp.sum(u_rel**2, axis=1))
             actf = act.astype(f64)
@@ -462,23 +463,26 @@ class PneumaticChannel:
             if internal:  # in series with the transient internal coefficient at Fo(t_res)
                 alpha = series_with_transient_sphere(alpha, d, lam_p, rho_c, t_E)
             G = alpha * area * actf
-            Gk = jax.ops.segment_sum(G, k, n_cells)
             if two_way:
-                GTk = jax.ops.segment_sum(G * T, k, n_cells)
+                Gk, GTk = jax.ops.segment_sum(jnp.stack([G, G * T], axis=1), k, n_cells).T
                 T_nodes, T_eff = march_gas(Gk, GTk, T_g_in, W)
                 q = G * (T_eff[k] - T)
                 dH = dt * W * (T_g_in - T_nodes[-1])
             else:
+                Gk = jax.ops.segment_sum(G, k, n_cells)
                 T_nodes = jnp.full(n_cells + 1, T_g_in)
                 q = G * (T_g_in - T)
                 dH = dt * jnp.sum(q)
             acc = extra["acc"]
-            seg = lambda x: jax.ops.segment_sum(x * actf, k, n_cells)  # noqa: E731
+            # the per-cell profiles in one scatter (one column per quantity)
+            cols = jnp.stack([mass * actf, C * T * actf, C * actf, area * actf,
+                              mass * vel[:, 1] * actf, mass * slip * actf, q], axis=1)
+            m_k, CT_k, C_k, A_k, mv_k, mslip_k, q_k = jax.ops.segment_sum(cols, k, n_cells).T
             acc = dict(
-                acc, t=acc["t"] + dt, m=acc["m"] + dt * seg(mass), CT=acc["CT"] + dt * seg(C * T),
-                C=acc["C"] + dt * seg(C), G=acc["G"] + dt * Gk, A=acc["A"] + dt * seg(area),
-                mv=acc["mv"] + dt * seg(mass * vel[:, 1]), mslip=acc["mslip"] + dt * seg(
-                    mass * slip), q=acc["q"] + dt * jax.ops.segment_sum(q, k, n_cells),
+                acc, t=acc["t"] + dt, m=acc["m"] + dt * m_k, CT=acc["CT"] + dt * CT_k,
+                C=acc["C"] + dt * C_k, G=acc["G"] + dt * Gk, A=acc["A"] + dt * A_k,
+                mv=acc["mv"] + dt * mv_k, mslip=acc["mslip"] + dt * mslip_k,
+                q=acc["q"] + dt * q_k,
                 Tg=acc["Tg"] + dt * T_nodes,
                 pairs=acc["pairs"] + jnp.sum(contacts.pair_mask, dtype=jnp.int32),
                 walls=acc["walls"] + jnp.sum(contacts.wall_mask, dtype=jnp.int32))
