@@ -62,7 +62,7 @@ def main(argv=None):
     a = ap.parse_args(argv)
     ok, why = cpu_kernel.available()
     if not ok:
-        raise SystemExit(f"C++ pair kernel unavailable: {why}")
+        raise SystemExit(f"C++ contact kernel unavailable: {why}")
     print(f"{os.cpu_count()} CPU cores, load {os.getloadavg()[0]:.1f}, JAX {jax.__version__}\n")
     print("| N | state | pair slots | touching | JAX kernel (ms) | C++ loop (ms) | JAX / C++ | "
           "max spring difference / max spring |")

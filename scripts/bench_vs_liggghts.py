@@ -19,11 +19,13 @@ Procedure for each N:
    (its ``Loop time``), on 1 and 2 MPI ranks.
 3. drumheat: the same state read from the data file (positions, velocities, spins; the
    tangential springs start at zero, the warm-up rebuilds them), float32 mechanics, float64
-   temperatures updated in the same jitted loop (``extra_update``) by the LIGGGHTS conduction
-   law ``q_ij = 4 k_i k_j / (k_i + k_j) sqrt(A_c) (T_j - T_i)`` with the overlap-circle area
-   A_c; ``nwarm`` steps (compilation included) then ``steps`` timed steps via
-   :meth:`DEM.run` (chunked, with the overflow / NaN / escape checks). Twice: with the JAX pair
-   kernel (the default, every backend) and with the C++ pair loop
+   temperatures updated every step in the same jitted loop by the LIGGGHTS conduction law
+   ``q_ij = 4 k_i k_j / (k_i + k_j) sqrt(A_c) (T_j - T_i)`` with the overlap-circle area A_c
+   (``make_dem(conduction=PairConduction("overlap", ...))``,
+   :mod:`drumheat.mechanics.conduction`; the C++ kernel sums it in its contact loop); ``nwarm``
+   steps (compilation included) then ``steps`` timed steps via :meth:`DEM.run` (chunked, with
+   the overflow / NaN / escape checks). Twice: with the JAX
+   kernel (the default, every backend) and with the C++ contact loop
    (``make_dem(pair_kernel="cpu")``, :mod:`drumheat.mechanics.cpu_kernel`) where it can be built.
 
 Output: a table N x code x ranks with particle-steps/s and the ratio to drumheat (and the
@@ -53,6 +55,7 @@ import numpy as np
 import drumheat  # noqa: F401  (x64 for the temperatures)
 from drumheat.geometry import DrumShell
 from drumheat.mechanics import contact_params, cpu_kernel, make_dem, make_particles
+from drumheat.mechanics.conduction import PairConduction
 
 PEERS = Path(__file__).resolve().parents[1].parent / "shared" / "peers" / "liggghts"
 if not PEERS.exists():  # a checkout elsewhere
@@ -140,38 +143,16 @@ def read_data(path):
     return pos, V[:, 1:4], V[:, 4:7], 0.5 * A[:, 2], zhi - zlo
 
 
-def conduction(n, radius, mc):
-    """LIGGGHTS heat/gran/conduction (overlap area) as a drumheat ``extra_update``; T float64."""
-    hk = 4 * K_COND * K_COND / (2 * K_COND)
-    r = jnp.asarray(radius, jnp.float64)
-
-    def update(T, state, c, dt):
-        i = jnp.where(c.pair_mask, c.pair_i, 0)
-        j = jnp.where(c.pair_mask, c.pair_j, 0)
-        L = c.pair_distance.astype(jnp.float64)
-        ri, rj = r[i], r[j]
-        Ls = jnp.where(c.pair_mask, L, 1.0)
-        area = -math.pi / 4 * ((Ls - ri - rj) * (Ls + ri - rj) * (Ls - ri + rj)
-                               * (Ls + ri + rj)) / (Ls * Ls)
-        hc = hk * jnp.sqrt(jnp.maximum(area, 0.0))
-        q = jnp.where(c.pair_mask, hc * (T[j] - T[i]), 0.0)
-        dq = (jax.ops.segment_sum(q, c.pair_i, n, indices_are_sorted=True)
-              - jax.ops.segment_sum(q, c.pair_j, n))
-        return T + dt * dq / mc
-
-    return update
-
-
 def drumheat_setup(dat, thermal, pair_kernel="jax"):
     pos, vel, omega, radius, L = read_data(dat)
-    n = len(pos)
     part = make_particles(radius, RHO)
     params = contact_params(KN_PP, kn_wall=KN_PW, restitution=E_REST, restitution_model="linear",
                             friction=MU, wall_friction=MU)
-    mc = jnp.asarray(np.asarray(part.mass) * C_P)
-    upd = conduction(n, radius, mc) if thermal else None
+    # LIGGGHTS heat/gran/conduction: h = 4 k_i k_j / (k_i + k_j) on sqrt(overlap circle area)
+    cond = (PairConduction("overlap", 4 * K_COND * K_COND / (2 * K_COND),
+                           np.asarray(part.mass) * C_P) if thermal else None)
     dem = make_dem(part, [DrumShell(R_DRUM, rpm=RPM)], params, dim=3, periodic_length=L, dt=DT,
-                   skin=SKIN, dtype=jnp.float32, extra_update=upd, pair_kernel=pair_kernel)
+                   skin=SKIN, dtype=jnp.float32, conduction=cond, pair_kernel=pair_kernel)
     T = None
     if thermal:  # a temperature gradient across the bed so that heat actually flows
         T = jnp.asarray(T0 + 50.0 * (pos[:, 0] - pos[:, 0].min()) / np.ptp(pos[:, 0]),
@@ -266,10 +247,10 @@ def main():
                 continue
         for kernel in args.pair_kernel:
             if kernel == "cpu" and not cpu_kernel.available()[0]:
-                print(f"  C++ pair kernel unavailable: {cpu_kernel.available()[1]}")
+                print(f"  C++ contact kernel unavailable: {cpu_kernel.available()[1]}")
                 continue
             r = time_drumheat(dat, steps, warm, thermal, kernel)
-            code = f"drumheat ({'JAX' if kernel == 'jax' else 'C++'} pair kernel)"
+            code = f"drumheat ({'JAX' if kernel == 'jax' else 'C++'} kernel)"
             rows.append((n, code, "-", steps, r))
             print(f"  N={n} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
                   f"{r['load']:.2f}, rebuilds {r['rebuilds']}) {r['note']}", flush=True)

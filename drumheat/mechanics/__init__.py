@@ -2,8 +2,9 @@
 
 Contact laws (:mod:`.contact_forces`), neighbour lists with tangential history
 (:mod:`.neighbors`), velocity-Verlet integration with a checked chunked runner
-(:mod:`.integrator`), bed generation (:mod:`.pour`), analysis (:mod:`.analysis`) and the
-exceptions (:mod:`.errors`).
+(:mod:`.integrator`), per-step contact conduction in the force loop (:mod:`.conduction`), the
+opt-in C++ contact kernel for CPUs (:mod:`.cpu_kernel`), bed generation (:mod:`.pour`),
+analysis (:mod:`.analysis`) and the exceptions (:mod:`.errors`).
 """
 
 from drumheat.mechanics.contact_forces import (  # noqa: F401
@@ -14,6 +15,7 @@ from drumheat.mechanics.contact_forces import (  # noqa: F401
     normal_stiffness_from_youngs,
     restitution_from_damping_ratio,
 )
+from drumheat.mechanics.conduction import PairConduction  # noqa: F401
 from drumheat.mechanics.errors import (  # noqa: F401
     DEMError,
     NeighborListError,

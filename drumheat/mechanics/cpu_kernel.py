@@ -1,23 +1,29 @@
-"""The DEM pair kernel as one C++ loop on CPU (opt-in: ``make_dem(..., pair_kernel="cpu")``).
+"""The DEM contact loop in C++ on CPU (opt-in: ``make_dem(..., pair_kernel="cpu")``).
 
-On XLA:CPU the JAX pair kernel of :mod:`drumheat.mechanics.integrator` runs as some twenty
-passes over the pair slots plus a scatter-add, about a third of LIGGGHTS' speed per core
-(docs/performance.md). ``pair_kernel.cc`` computes the same contact law
-(:func:`drumheat.mechanics.contact_forces.contact_law`) in one loop over the pairs and is
-called through ``jax.ffi`` (an XLA custom call): 2.3-2.4x faster than the JAX kernel on the
-3D drum slice at N = 2 000 and 10 000 (``scripts/bench_cpu_pair_kernel.py``), the whole DEM
-step with conduction 1.7-2.5x (``scripts/bench_vs_liggghts.py``, docs/performance.md). From
-100 000 pair slots up the loop is split over the cores (``DRUMHEAT_KERNEL_THREADS`` caps the
-threads); the force sums then depend on the thread count by round-off.
+On XLA:CPU the JAX force kernel of :mod:`drumheat.mechanics.integrator` runs as some twenty
+passes over the pair slots plus scatter-adds, about a third of LIGGGHTS' speed per core
+(docs/performance.md). ``contact_kernel.cc`` computes the same contact law
+(:func:`drumheat.mechanics.contact_forces.contact_law`) for the particle-particle pairs and
+the particle-wall contacts in one loop, called through ``jax.ffi`` (an XLA custom call); the
+wall geometry (distance, normal, surface velocity of every wall at every particle) still comes
+from the JAX walls, so every wall type works. With ``make_dem(..., conduction=...)`` the same
+loop sums the contact heat flows (:mod:`drumheat.mechanics.conduction`). The loop is cut into
+as many chunks as XLA's intra-op thread pool has threads (at most one per 8 000 pair slots;
+``DRUMHEAT_KERNEL_THREADS`` sets the number) and run on that pool, so no threads are started
+per step; each chunk sums into its own buffer and the buffers are added in chunk order, so the
+result depends on the chunk count by round-off and on nothing else. The pair and wall springs
+are updated in place (aliased buffers). Speed: docs/performance.md
+(``scripts/bench_cpu_pair_kernel.py`` kernel against kernel, ``scripts/bench_vs_liggghts.py``
+the whole step against LIGGGHTS).
 
 Scope: 3D, one material (single-row contact tables), no rolling resistance, float32 mechanics,
 the CPU backend, single runs (not under ``vmap``, not differentiable). :func:`check_supported`
 says why a configuration is refused. The JAX kernel stays the reference and the path for GPUs,
 ensembles and everything else; ``tests/test_cpu_kernel.py`` holds the two equal to round-off.
 
-The source is compiled with ``g++ -O3`` on first use into
+The source is compiled with ``g++ -O3 -fno-math-errno`` on first use into
 ``$DRUMHEAT_CACHE_DIR/kernels`` (default ``~/.cache/drumheat/kernels``), named by the hash of
-the source and the jaxlib version, and registered once per process.
+the source, the flags and the jaxlib version, and registered once per process.
 """
 
 from __future__ import annotations
@@ -33,10 +39,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["TARGET", "available", "check_supported", "load", "pair_forces"]
+__all__ = ["TARGET", "available", "check_supported", "contacts", "load"]
 
-TARGET = "drumheat_pair_forces"
-SOURCE = Path(__file__).with_name("pair_kernel.cc")
+TARGET = "drumheat_contacts"
+SOURCE = Path(__file__).with_name("contact_kernel.cc")
 _LOADED = False
 
 
@@ -68,23 +74,24 @@ def load() -> str:
         return TARGET
     ok, why = available()
     if not ok:
-        raise RuntimeError(f"the C++ pair kernel is not available: {why}")
+        raise RuntimeError(f"the C++ contact kernel is not available: {why}")
     src = SOURCE.read_text()
     import jaxlib
 
-    key = hashlib.sha256((src + jaxlib.__version__).encode()).hexdigest()[:16]
-    out = _cache_dir() / f"pair_kernel_{key}.so"
+    flags = ["-O3", "-fno-math-errno", "-shared", "-fPIC", "-std=c++17", "-w"]
+    key = hashlib.sha256("\n".join([src, jaxlib.__version__] + flags).encode()).hexdigest()[:16]
+    out = _cache_dir() / f"contact_kernel_{key}.so"
     if not out.exists():
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.with_suffix(f".{os.getpid()}.tmp")
-        cmd = [os.environ.get("CXX", "g++"), "-O3", "-shared", "-fPIC", "-std=c++17", "-w",
-               f"-I{jax.ffi.include_dir()}", str(SOURCE), "-o", str(tmp)]
+        cmd = [os.environ.get("CXX", "g++"), *flags, f"-I{jax.ffi.include_dir()}", str(SOURCE),
+               "-o", str(tmp)]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
-            raise RuntimeError("compiling the C++ pair kernel failed:\n" + proc.stderr[-2000:])
+            raise RuntimeError("compiling the C++ contact kernel failed:\n" + proc.stderr[-2000:])
         os.replace(tmp, out)  # atomic: parallel test workers may build at once
     lib = ctypes.cdll.LoadLibrary(str(out))
-    jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(lib.PairForces), platform="cpu")
+    jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(lib.Contacts), platform="cpu")
     _LOADED = True
     return TARGET
 
@@ -110,28 +117,54 @@ def check_supported(dim, params, dtype, batch_axis) -> None:
                          + ". Use pair_kernel='jax'.")
 
 
-def pair_forces(pos, vel, omega, radius, mass, idx, spring, *, kn, kt, zeta_n, zeta_t, mu, dt,
-                periodic_length=None):
-    """Pair contact forces of all neighbour pairs in one C++ loop (float32).
+def contacts(pos, vel, omega, radius, mass, idx, spring, wall_distance, wall_normal,
+             wall_velocity, wall_spring, wall_params, *, kn, kt, zeta_n, zeta_t, mu, dt,
+             periodic_length=None, temperature=None, conduction_law=None, conduction_h=0.0):
+    """Particle-particle and particle-wall contact forces in one C++ loop (float32).
 
-    Args: positions, velocities, spins (N, 3); radius, mass (N); idx (2, M) OrderedSparse pairs
-    (padding N); spring (M, 3) tangential springs; scalar contact parameters as in
-    :func:`drumheat.mechanics.contact_forces.contact_law`; periodic_length of z or None.
-    Returns ``(force, torque, spring, overlap, distance, normal_force, max_overlap)``: contact
-    forces and torques on the particles (N, 3), the new springs (M, 3), per pair the overlap,
-    centre distance and normal force (M), zero where the pair does not touch, and the largest
-    overlap / smaller radius of the pair (1,).
+    Args:
+      pos, vel, omega: positions, velocities, spins (N, 3).
+      radius, mass: (N,).
+      idx: (2, M) OrderedSparse neighbour pairs (padding N); spring: (M, 3) tangential springs.
+      wall_distance: (N, W) distance of each particle centre from each wall; wall_normal:
+        (N, W, 3) unit normal from the wall towards the particle; wall_velocity: (N, W, 3)
+        velocity of the wall surface at the particle; wall_spring: (N, W, 3) tangential springs
+        (what :meth:`drumheat.geometry.walls.Wall.evaluate` returns, stacked over the walls).
+      wall_params: (5, W) per wall ``kn, kt, zeta_n, zeta_t, mu``.
+      kn, kt, zeta_n, zeta_t, mu, dt: particle-particle contact parameters as in
+        :func:`drumheat.mechanics.contact_forces.contact_law`; periodic_length of z or None.
+      temperature, conduction_law, conduction_h: with a law (``"projected"`` or ``"overlap"``,
+        :mod:`drumheat.mechanics.conduction`), the heat flow through the touching pairs at the
+        temperatures (N,) float64 is summed in the same loop.
+
+    Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
+    wall_overlap, wall_normal_force, max_overlap, heat)``: contact forces and torques on the
+    particles (N, 3); per pair the new springs (M, 3), overlap, centre distance and normal force
+    (M); per wall slot the new springs (N, W, 3), overlap and normal force (N, W); all zero where
+    nothing touches; the largest overlap / radius (the smaller radius of a pair) (1,); and the
+    heat flow into each particle (N,) float64, W (length 0 without a conduction law).
     """
     target = load()
     n, m = pos.shape[0], idx.shape[1]
+    nw = wall_distance.shape[1]
     f32 = jnp.float32
-    outs = [jax.ShapeDtypeStruct((n, 3), f32), jax.ShapeDtypeStruct((n, 3), f32),
-            jax.ShapeDtypeStruct((m, 3), f32), jax.ShapeDtypeStruct((m,), f32),
-            jax.ShapeDtypeStruct((m,), f32), jax.ShapeDtypeStruct((m,), f32),
-            jax.ShapeDtypeStruct((1,), f32)]
+    sd = jax.ShapeDtypeStruct
+    outs = [sd((n, 3), f32), sd((n, 3), f32), sd((m, 3), f32), sd((m,), f32), sd((m,), f32),
+            sd((m,), f32), sd((n, nw, 3), f32), sd((n, nw), f32), sd((n, nw), f32),
+            sd((1,), f32)]
+    if conduction_law is None:
+        law, temperature = -1, jnp.zeros((0,), jnp.float64)
+    else:
+        from drumheat.mechanics.conduction import LAWS
+
+        law = LAWS.index(conduction_law)
+    outs.append(sd((temperature.shape[0],), jnp.float64))
     c = lambda v: np.float32(v)  # noqa: E731
-    return jax.ffi.ffi_call(target, outs)(
+    # springs updated in place: input 6 -> output 2 (pairs), input 10 -> output 6 (walls)
+    return jax.ffi.ffi_call(target, outs, input_output_aliases={6: 2, 10: 6})(
         pos.astype(f32), vel.astype(f32), omega.astype(f32), radius.astype(f32),
         mass.astype(f32), idx.astype(jnp.int32), spring.astype(f32),
+        wall_distance.astype(f32), wall_normal.astype(f32), wall_velocity.astype(f32),
+        wall_spring.astype(f32), wall_params.astype(f32), temperature.astype(jnp.float64),
         kn=c(kn), kt=c(kt), zn=c(zeta_n), zt=c(zeta_t), mu=c(mu), dt=c(dt),
-        L=c(periodic_length or 0.0))
+        L=c(periodic_length or 0.0), law=np.int32(law), h=np.float64(conduction_h))

@@ -70,6 +70,8 @@ from drumheat.mechanics.contact_forces import (
     cross_w_a,
     rolling_torque,
 )
+from drumheat.mechanics.conduction import PairConduction
+from drumheat.mechanics.conduction import heat_flow as pair_heat_flow
 from drumheat.mechanics.errors import (
     NeighborListError,
     NonFiniteError,
@@ -192,6 +194,23 @@ class Contacts(NamedTuple):
 JIT_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 
 
+def wrap_periodic_axis(pos, periodic_length, near: bool = False):
+    """Positions with the last coordinate brought into ``[0, L)`` (L None: unchanged).
+
+    ``near=True`` assumes that coordinate lies in ``[-L, 2L)`` (a step moves a particle far
+    less than L) and shifts it by one period at most: the same numbers as ``mod`` there, in an
+    element-wise select that XLA:CPU fuses with the drift (``mod`` and a column scatter took
+    80 us at N = 1e4, this 30 us).
+    """
+    if periodic_length is None:
+        return pos
+    if not near:
+        return pos.at[:, -1].set(jnp.mod(pos[:, -1], periodic_length))
+    L = periodic_length
+    last = jnp.arange(pos.shape[-1]) == pos.shape[-1] - 1
+    return jnp.where(last & (pos >= L), pos - L, jnp.where(last & (pos < 0), pos + L, pos))
+
+
 def _jit(fun):
     return jax.jit(fun, compiler_options=JIT_OPTIONS)
 
@@ -281,6 +300,7 @@ class DEM:
     _external: Optional[Callable] = None
     step_fn: Optional[Callable] = None
     run_steps_fn: Optional[Callable] = None
+    conduction: Optional[PairConduction] = None
 
     # -- construction of states --------------------------------------------------------------
 
@@ -319,21 +339,27 @@ class DEM:
             pair_spring=jnp.zeros((cap, self.dim), dt_),
             wall_spring=jnp.zeros((n, n_w, self.dim), dt_),
             n_rebuilds=jnp.asarray(0, jnp.int32), max_overlap=jnp.asarray(0.0, dt_),
-            extra=extra,
+            extra=self._check_temperature(extra),
         )
-        f, m, _, _, _, ovl = self._forces(state.position, state.velocity, state.angular_velocity,
-                                          state.time, state.nbrs, state.pair_spring,
-                                          state.wall_spring)
+        f, m, _, _, _, ovl, _ = self._forces(state.position, state.velocity,
+                                             state.angular_velocity, state.time, state.nbrs,
+                                             state.pair_spring, state.wall_spring)
         if self._external is not None:
             f = f + jnp.asarray(self._external(state.position, state.velocity, state.time,
                                                state.extra), dt_)
         return state._replace(force=f, torque=m, max_overlap=ovl)
 
+    def _check_temperature(self, extra):
+        if self.conduction is None:
+            return extra
+        n = self.particles.n
+        if extra is None or np.shape(extra) != (n,):
+            raise ValueError(f"with conduction, extra must be the particle temperatures, shape "
+                             f"({n},); got {None if extra is None else np.shape(extra)}")
+        return jnp.asarray(extra, jnp.float64)
+
     def _wrap(self, pos):
-        if self.neighbor.periodic_length is None:
-            return pos
-        L = self.neighbor.periodic_length
-        return pos.at[:, -1].set(jnp.mod(pos[:, -1], L))
+        return wrap_periodic_axis(pos, self.neighbor.periodic_length)
 
     # -- stepping ------------------------------------------------------------------------------
 
@@ -472,6 +498,7 @@ def make_dem(
     chunk: int = 1000,
     batch_axis: Optional[str] = None,
     pair_kernel: str = "jax",
+    conduction: Optional[PairConduction] = None,
 ) -> DEM:
     """Compose a DEM system (static choices are fixed here, before ``jit``).
 
@@ -509,16 +536,23 @@ def make_dem(
         pairs are kept in canonical order (:func:`~drumheat.mechanics.neighbors.sort_pairs`)
         an extra rebuild does not change the trajectory. Leave None for single runs.
       pair_kernel: ``"jax"`` (default; every backend, vmap, any material table) or ``"cpu"``:
-        the particle-particle contacts in one C++ loop called through ``jax.ffi``
-        (:mod:`drumheat.mechanics.cpu_kernel`; the DEM step 1.7-2.5x faster on CPU; 3D, one
-        material, no rolling resistance, float32, single runs; compiled with g++ on first
-        use). Same contact law; results agree with ``"jax"`` to float32 round-off.
+        the particle-particle and particle-wall contacts (and the conduction) in one C++ loop
+        on XLA's CPU threads, called through ``jax.ffi`` (:mod:`drumheat.mechanics.cpu_kernel`;
+        the DEM step 3-5x faster on CPU, docs/performance.md; 3D, one material, no rolling
+        resistance, float32, single runs; compiled with g++ on first use). Same contact law;
+        results agree with ``"jax"`` to float32 round-off.
+      conduction: :class:`~drumheat.mechanics.conduction.PairConduction`: heat conduction
+        through the touching pairs every step (:mod:`drumheat.mechanics.conduction`); the
+        state's ``extra`` is then the particle temperatures (N,), float64, advanced after the
+        forces of every step and before ``extra_update``.
     """
     if dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3, got {dim}")
     if pair_kernel not in ("jax", "cpu"):
         raise ValueError(f"pair_kernel must be 'jax' or 'cpu', got {pair_kernel!r}")
     use_cpu_kernel = pair_kernel == "cpu"
+    if conduction is not None:
+        conduction = PairConduction(*conduction).checked(particles.n)
     if use_cpu_kernel:
         from drumheat.mechanics import cpu_kernel
 
@@ -634,8 +668,11 @@ def make_dem(
         cpu_params = {k: float(np.asarray(getattr(params, f"{k}_pp"))[0, 0])
                       for k in ("kn", "kt", "zeta_n", "zeta_t", "mu")}
         cpu_params["dt"] = float(dt)
+        cpu_wall_params = jnp.stack([wall_table(getattr(params, f"{k}_pw"))[0]
+                                     for k in ("kn", "kt", "zeta_n", "zeta_t", "mu")])
 
-    def forces(pos, vel, w, t, nbrs, pair_spring, wall_spring, vel_h=None, w_h=None):
+    def forces(pos, vel, w, t, nbrs, pair_spring, wall_spring, vel_h=None, w_h=None,
+               temperature=None):
         # the integrator passes one set of (half-step) velocities for the dashpots and the
         # spring increment; the relative velocity is then computed once
         split_h = vel_h is not None or w_h is not None
@@ -647,30 +684,43 @@ def make_dem(
         i = nbrs.idx[0]
         j = nbrs.idx[1]
         if use_cpu_kernel and not split_h:
-            # one C++ loop (drumheat.mechanics.cpu_kernel); its per-pair outputs are already
-            # zero where a pair does not touch
-            fk, tk, new_spring, ovl, dist, fn, mx = cpu_kernel.pair_forces(
-                pos, vel, w, radius, mass, nbrs.idx, pair_spring, periodic_length=periodic_length,
-                **cpu_params)
+            # pairs and walls in one C++ loop (drumheat.mechanics.cpu_kernel), the wall geometry
+            # from JAX; its per-slot outputs are already zero where nothing touches
+            wd, wn, wv = wall_geometry(pos, t)
+            heat_args = {}
+            if conduction is not None and temperature is not None:
+                heat_args = dict(temperature=temperature, conduction_law=conduction.law,
+                                 conduction_h=conduction.coefficient)
+            (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx,
+             heat) = cpu_kernel.contacts(pos, vel, w, radius, mass, nbrs.idx, pair_spring, wd,
+                                         wn, wv, wall_spring, cpu_wall_params,
+                                         periodic_length=periodic_length, **cpu_params,
+                                         **heat_args)
             force = force + fk
             torque = torque + tk
             active = ovl > 0
             max_ovl = mx[0]
+            w_part, w_idx, w_id, w_mask, w_ovl, w_fn = wall_slots(w_ovl > 0, w_ovl, w_fn)
         else:
             force, torque, new_spring, ovl, dist, fn, active, max_ovl = pair_part(
                 pos, vel, w, nbrs, pair_spring, vel_h, w_h, split_h, force, torque, i, j)
             ovl = jnp.where(active, ovl, 0.0)
             dist = jnp.where(active, dist, 0.0)
-        wall_out = wall_part(pos, vel, w, t, wall_spring, vel_h, w_h, split_h, force, torque,
-                             max_ovl)
-        force, torque, new_wall_spring, max_ovl, w_part, w_idx, w_id, w_mask, w_ovl, w_fn = \
-            wall_out
+            wall_out = wall_part(pos, vel, w, t, wall_spring, vel_h, w_h, split_h, force,
+                                 torque, max_ovl)
+            force, torque, new_wall_spring, max_ovl, w_part, w_idx, w_id, w_mask, w_ovl, w_fn = \
+                wall_out
         contacts = Contacts(
             pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
             pair_normal_force=fn,
             wall_particle=w_part, wall_index=w_idx, wall_id=w_id, wall_mask=w_mask,
             wall_overlap=w_ovl, wall_normal_force=w_fn)
-        return force, torque, new_spring, new_wall_spring, contacts, max_ovl
+        if conduction is None or temperature is None:
+            heat = None
+        elif not (use_cpu_kernel and not split_h):
+            heat = pair_heat_flow(temperature, contacts, particles.radius, conduction.law,
+                                  conduction.coefficient)
+        return force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat
 
     def pair_part(pos, vel, w, nbrs, pair_spring, vel_h, w_h, split_h, force, torque, i, j):
         valid = i < n
@@ -734,10 +784,7 @@ def make_dem(
     def wall_part(pos, vel, w, t, wall_spring, vel_h, w_h, split_h, force, torque, max_ovl):
         # ---- particle-wall ---------------------------------------------------------------------
         if n_w > 0:
-            evs = [wl.evaluate(pos, t) for wl in walls]
-            wd = jnp.stack([e[0] for e in evs], axis=1).astype(dtype)  # (N, W)
-            wn = jnp.stack([e[1] for e in evs], axis=1).astype(dtype)  # (N, W, dim)
-            wv = jnp.stack([e[2] for e in evs], axis=1).astype(dtype)
+            wd, wn, wv = wall_geometry(pos, t)
             r_ = radius[:, None]
             wovl = r_ - wd
             wact = wovl > 0
@@ -767,19 +814,31 @@ def make_dem(
                 torque = torque + jnp.sum(tq, axis=1)
             new_wall_spring = resw.spring
             max_ovl = jnp.maximum(max_ovl, jnp.max(jnp.where(wact, wovl / r_, 0.0)))
-            w_part = jnp.repeat(jnp.arange(n, dtype=jnp.int32), n_w)
-            w_idx = jnp.tile(jnp.arange(n_w, dtype=jnp.int32), n)
-            w_id = jnp.tile(jnp.asarray(wall_ids), n)
-            w_mask = wact.reshape(-1)
-            w_ovl = jnp.where(wact, wovl, 0.0).reshape(-1)
-            w_fn = resw.normal_force.reshape(-1)
+            slots = wall_slots(wact, wovl, resw.normal_force)
         else:
             new_wall_spring = wall_spring
-            w_part = w_idx = w_id = jnp.zeros((0,), jnp.int32)
-            w_mask = jnp.zeros((0,), bool)
-            w_ovl = w_fn = jnp.zeros((0,), dtype)
-        return (force, torque, new_wall_spring, max_ovl, w_part, w_idx, w_id, w_mask, w_ovl,
-                w_fn)
+            slots = wall_slots(None, None, None)
+        return (force, torque, new_wall_spring, max_ovl) + slots
+
+    def wall_geometry(pos, t):
+        """Distance (N, W), unit normal towards the particle and wall velocity (N, W, dim)."""
+        if n_w == 0:
+            return (jnp.zeros((n, 0), dtype), jnp.zeros((n, 0, dim), dtype),
+                    jnp.zeros((n, 0, dim), dtype))
+        evs = [wl.evaluate(pos, t) for wl in walls]
+        return tuple(jnp.stack([e[k] for e in evs], axis=1).astype(dtype) for k in range(3))
+
+    def wall_slots(wact, wovl, wfn):
+        """The wall fields of :class:`Contacts`, flattened over the (N, W) slots."""
+        if n_w == 0:
+            empty = jnp.zeros((0,), jnp.int32)
+            return (empty, empty, empty, jnp.zeros((0,), bool), jnp.zeros((0,), dtype),
+                    jnp.zeros((0,), dtype))
+        w_part = jnp.repeat(jnp.arange(n, dtype=jnp.int32), n_w)
+        w_idx = jnp.tile(jnp.arange(n_w, dtype=jnp.int32), n)
+        w_id = jnp.tile(jnp.asarray(wall_ids), n)
+        return (w_part, w_idx, w_id, wact.reshape(-1), jnp.where(wact, wovl, 0.0).reshape(-1),
+                wfn.reshape(-1))
 
     half = 0.5 * dt
     inv_m = 1.0 / mass
@@ -788,9 +847,7 @@ def make_dem(
     time_dtype = jnp.float64 if jax.config.jax_enable_x64 else dtype
 
     def _wrap(pos):
-        if periodic_length is None:
-            return pos
-        return pos.at[:, -1].set(jnp.mod(pos[:, -1], periodic_length))
+        return wrap_periodic_axis(pos, periodic_length, near=True)
 
     def rebuild(args):
         pos, nbrs, spring, count, pdata = args
@@ -802,28 +859,40 @@ def make_dem(
         pos, nbrs, spring, count, pdata = args
         return nbrs, spring, count, pdata
 
-    def step(state: DEMState):
+    def drift(state: DEMState):
+        """First half-kick and drift: half-step velocities, spins and the new positions."""
         v = state.velocity + half * state.force * inv_m[:, None]
         if rotation:
             tq = state.torque
             w = state.angular_velocity + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
         else:
             w = state.angular_velocity
-        x = _wrap(state.position + dt * v)
+        return v, w, _wrap(state.position + dt * v)
+
+    def needs_rebuild(state: DEMState, x):
+        return neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
+
+    def step(state: DEMState, pairs: str = "check"):
+        # pairs: "check" (rebuild the neighbour list if some particle moved more than half the
+        # skin: a lax.cond), "keep" (the caller knows it need not) or "rebuild"
+        v, w, x = drift(state)
         t = state.time + jnp.asarray(dt, time_dtype)
         extra = state.extra
         args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
-        if always_rebuild:
+        if always_rebuild or pairs == "rebuild":
             nbrs, spring, count, pdata = rebuild(args)
+        elif pairs == "keep":
+            nbrs, spring, count, pdata = keep(args)
         else:
-            need = neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
+            need = needs_rebuild(state, x)
             if batch_axis is not None:
                 need = jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
             nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
         if pdata is not None:
             extra = dict(extra, pair_data=pdata)
-        f, tq, spring, wspring, contacts, ovl = forces(x, v, w, t, nbrs, spring,
-                                                       state.wall_spring)
+        f, tq, spring, wspring, contacts, ovl, heat = forces(
+            x, v, w, t, nbrs, spring, state.wall_spring,
+            temperature=extra if conduction is not None else None)
         if external_force is not None:
             f = f + external_force(x, v, t, extra).astype(dtype)
         v = v + half * f * inv_m[:, None]
@@ -833,6 +902,8 @@ def make_dem(
                        step=state.step + 1, nbrs=nbrs, pair_spring=spring, wall_spring=wspring,
                        n_rebuilds=count, max_overlap=jnp.maximum(state.max_overlap, ovl),
                        extra=extra)
+        if conduction is not None:
+            new = new._replace(extra=extra + dt * heat / conduction.heat_capacity)
         if extra_update is not None:
             new = new._replace(extra=extra_update(new.extra, new, contacts, dt))
         if boundary_update is not None:
@@ -865,8 +936,36 @@ def make_dem(
                     total=ek + er + ep + el)
 
     def run_steps(state, n_steps):
-        # a fori_loop with a traced trip count: one compilation serves every chunk length
-        return jax.lax.fori_loop(0, n_steps, lambda k, st: step(st)[0], state)
+        # a loop with a traced trip count: one compilation serves every chunk length
+        if batch_axis is not None or always_rebuild:
+            return jax.lax.fori_loop(0, n_steps, lambda k, st: step(st)[0], state)
+        return run_segments(state, n_steps)
+
+    def run_segments(state, n_steps):
+        """The same steps as ``fori_loop(step)``, as runs of steps between neighbour rebuilds.
+
+        Inside a run the neighbour list is known to stay valid (the loop condition tests the
+        coming step's drift against the skin), so the step carries it unchanged; each run ends
+        with one step that rebuilds. Without the per-step ``lax.cond`` XLA updates the pair
+        arrays in place instead of copying the neighbour indices and springs every step
+        (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
+        the trajectory, are those of :func:`step`.
+        """
+        def fast(c):
+            st, k = c
+            return step(st, "keep")[0], k + 1
+
+        def go_on(c):
+            st, k = c
+            return (k < n_steps) & ~needs_rebuild(st, drift(st)[2])
+
+        def segment(c):
+            st, k = jax.lax.while_loop(go_on, fast, c)
+            return jax.lax.cond(k < n_steps, lambda a: (step(a[0], "rebuild")[0], a[1] + 1),
+                                lambda a: a, (st, k))
+
+        k0 = jnp.zeros_like(jnp.asarray(n_steps))
+        return jax.lax.while_loop(lambda c: c[1] < n_steps, segment, (state, k0))[0]
 
     diag = jax.jit(partial(_chunk_diagnostics, lo=dom_lo, hi=dom_hi, periodic_axis=periodic_axis))
     return DEM(
@@ -874,6 +973,6 @@ def make_dem(
         particles=particles, params=params, neighbor=neighbor, dtype=dtype, gravity=gravity,
         max_overlap=float(max_overlap), domain_lo=dom_lo, domain_hi=dom_hi,
         _forces=_jit(forces), _step=_jit(step), _run_steps=_jit(run_steps), _diag=diag,
-        _energies=_jit(energies), default_chunk=int(chunk),
+        _energies=_jit(energies), default_chunk=int(chunk), conduction=conduction,
         cell_capacity=cell_cap, _external=external_force, step_fn=step, run_steps_fn=run_steps,
     )

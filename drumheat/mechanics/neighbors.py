@@ -110,7 +110,9 @@ def sort_pairs(nbrs, n):
     import dataclasses
 
     order = jnp.argsort(pair_keys(nbrs.idx, n))
-    return dataclasses.replace(nbrs, idx=nbrs.idx[:, order])
+    # two row gathers stacked (not idx[:, order]): XLA:CPU then keeps idx row-major, the
+    # layout of the scan carry, instead of converting it back and forth every step
+    return dataclasses.replace(nbrs, idx=jnp.stack([nbrs.idx[0][order], nbrs.idx[1][order]]))
 
 
 @dataclass(frozen=True)
