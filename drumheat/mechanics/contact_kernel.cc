@@ -1,4 +1,4 @@
-// DEM contact kernel for CPU as one loop: an XLA FFI custom call (drumheat/mechanics/cpu_kernel.py).
+// DEM contact kernel for CPU as one loop: an XLA FFI custom call (mechanics/cpu_kernel.py).
 //
 // The same contact law as drumheat.mechanics.contact_forces.contact_law (linear spring-dashpot
 // normal force clipped at zero, Cundall-Strack tangential spring rotated onto the tangent plane,
@@ -154,8 +154,9 @@ static ffi::Error ContactsImpl(
     ffi::Buffer<ffi::F32> omg, ffi::Buffer<ffi::F32> rad, ffi::Buffer<ffi::F32> mass,
     ffi::Buffer<ffi::S32> pairs, ffi::Buffer<ffi::F32> spring, ffi::Buffer<ffi::F32> wdist,
     ffi::Buffer<ffi::F32> wnrm, ffi::Buffer<ffi::F32> wvel, ffi::Buffer<ffi::F32> wspring,
-    ffi::Buffer<ffi::F32> wparams, ffi::Buffer<ffi::F64> temp, float kn, float kt, float zn, float zt, float mu, float dt,
-    float L, int32_t law, double h, ffi::ResultBuffer<ffi::F32> force, ffi::ResultBuffer<ffi::F32> torque,
+    ffi::Buffer<ffi::F32> wparams, ffi::Buffer<ffi::F64> temp, float kn, float kt, float zn,
+    float zt, float mu, float dt, float L, int32_t law, double h,
+    ffi::ResultBuffer<ffi::F32> force, ffi::ResultBuffer<ffi::F32> torque,
     ffi::ResultBuffer<ffi::F32> nspring, ffi::ResultBuffer<ffi::F32> ovl_out,
     ffi::ResultBuffer<ffi::F32> dist_out, ffi::ResultBuffer<ffi::F32> fn_out,
     ffi::ResultBuffer<ffi::F32> nwspring, ffi::ResultBuffer<ffi::F32> wovl_out,
