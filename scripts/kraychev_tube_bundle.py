@@ -109,6 +109,8 @@ def report(out: Path) -> None:
     for r in rows:  # a jammed slit: no flow, no moving bed; (5-18) does not apply
         if r["n_discharged"] == 0 or r["Pe_star"] < 54.0:
             r["alpha_corr"] = float("nan")
+        # heat carried out by the solids over heat from the tubes (1 in a steady state)
+        r["QM1_ratio"] = r["Q_M1"] / r["Q_tubes"] if r["Q_tubes"] else float("nan")
     rows.sort(key=lambda r: (r["material"], r["S"], r["depth"] / r["d_p"]))
     head = ("| material | d_p [mm] | S [mm] | S/d_p | depth/d_p | N | W_p DEM axis [m/s] | "
             "W_p DEM slit (8-5) [m/s] | W_p eq. 5-5 [m/s] | alpha_1 DEM [W/(m2 K)] | "
@@ -120,7 +122,7 @@ def report(out: Path) -> None:
            "QM1_over_Qtubes,wall_time_s"]
     for r in rows:
         f, s = r.get("first_half", {}), r.get("second_half", {})
-        ratio = r["Q_M1"] / r["Q_tubes"] if r["Q_tubes"] else float("nan")
+        ratio = r["QM1_ratio"]
         lines.append(
             f"| {r['material']} | {r['d_p'] * 1e3:.2f} | {r['S'] * 1e3:.0f} | "
             f"{r['S_over_dp']:.2f} | {r['depth'] / r['d_p']:.1f} | {r['n_particles']} | "
@@ -167,8 +169,8 @@ def report(out: Path) -> None:
         ax[1].plot([r["S_over_dp"] for r in rs], [r["alpha_1"] for r in rs], "o", color=c,
                    label=f"{name} DEM (Q tubes)")
         ax[1].plot([r["S_over_dp"] for r in rs],
-                   [r["alpha_1"] * r["Q_M1"] / r["Q_tubes"] if r["Q_tubes"] else np.nan
-                    for r in rs], "o", mfc="none", color=c, label=f"{name} DEM (Q_M1 carried out)")
+                   [r["alpha_1"] * r["QM1_ratio"] for r in rs], "o", mfc="none", color=c,
+                   label=f"{name} DEM (Q_M1 carried out)")
         ax[1].plot([r["S_over_dp"] for r in rs], [r["alpha_corr"] for r in rs], "x--", color=c,
                    label=f"{name} eq. (5-18), Pe* from DEM W_p")
         for r in rs:

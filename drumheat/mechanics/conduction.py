@@ -14,7 +14,8 @@ with one of two conductance laws:
 
 * ``"projected"``: ``g = h pi min(r_i, r_j)^2``, h = alpha_pp in W/(m^2 K) on the projected
   area ``A_p = pi d^2 / 4`` of the smaller sphere: weigler-thermal-dem.md eq. [2.7] (the same
-  law as :class:`drumheat.thermal.contact.ContactConduction`).
+  law and area, :func:`drumheat.thermal.contact.projected_area`, as
+  :class:`drumheat.thermal.contact.ContactConduction`).
 * ``"overlap"``: ``g = h sqrt(A_c)`` with ``A_c = pi a^2`` the area of the circle where the two
   spheres overlap, ``a^2 = r_i^2 - ((L^2 + r_i^2 - r_j^2) / 2L)^2`` at centre distance L, and
   h = 4 k_i k_j / (k_i + k_j) in W/(m K) (LIGGGHTS ``heat/gran/conduction`` without area
@@ -36,6 +37,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from drumheat.thermal.contact import projected_area
 
 __all__ = ["LAWS", "PairConduction", "pair_conductance", "heat_flow"]
 
@@ -72,7 +75,7 @@ def pair_conductance(law: str, h, ri, rj, distance):
     """Conductance g (W/K) of touching pairs at centre distance ``distance`` (module docstring)."""
     ri, rj, L = (jnp.asarray(a, jnp.float64) for a in (ri, rj, distance))
     if law == "projected":
-        return h * jnp.pi * jnp.minimum(ri, rj) ** 2
+        return h * projected_area(2.0 * ri, 2.0 * rj)
     area = -0.25 * jnp.pi * ((L - ri - rj) * (L + ri - rj) * (L - ri + rj) * (L + ri + rj)) / (
         L * L)
     return h * jnp.sqrt(jnp.maximum(area, 0.0))

@@ -683,7 +683,8 @@ def make_dem(
         # ---- particle-particle -----------------------------------------------------------------
         i = nbrs.idx[0]
         j = nbrs.idx[1]
-        if use_cpu_kernel and not split_h:
+        in_kernel = use_cpu_kernel and not split_h
+        if in_kernel:
             # pairs and walls in one C++ loop (drumheat.mechanics.cpu_kernel), the wall geometry
             # from JAX; its per-slot outputs are already zero where nothing touches
             wd, wn, wv = wall_geometry(pos, t)
@@ -717,7 +718,7 @@ def make_dem(
             wall_overlap=w_ovl, wall_normal_force=w_fn)
         if conduction is None or temperature is None:
             heat = None
-        elif not (use_cpu_kernel and not split_h):
+        elif not in_kernel:
             heat = pair_heat_flow(temperature, contacts, particles.radius, conduction.law,
                                   conduction.coefficient)
         return force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat
@@ -872,10 +873,11 @@ def make_dem(
     def needs_rebuild(state: DEMState, x):
         return neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
 
-    def step(state: DEMState, pairs: str = "check"):
+    def step(state: DEMState, pairs: str = "check", drifted=None):
         # pairs: "check" (rebuild the neighbour list if some particle moved more than half the
-        # skin: a lax.cond), "keep" (the caller knows it need not) or "rebuild"
-        v, w, x = drift(state)
+        # skin: a lax.cond), "keep" (the caller knows it need not) or "rebuild"; drifted:
+        # drift(state) if the caller has it already
+        v, w, x = drift(state) if drifted is None else drifted
         t = state.time + jnp.asarray(dt, time_dtype)
         extra = state.extra
         args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
@@ -951,21 +953,24 @@ def make_dem(
         (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
         the trajectory, are those of :func:`step`.
         """
-        def fast(c):
-            st, k = c
-            return step(st, "keep")[0], k + 1
+        # the carry holds the coming step's drift, computed once: the loop condition tests it
+        # against the skin and the step goes on from it
+        def advance(c, pairs):
+            st, k, d = c
+            new = step(st, pairs, d)[0]
+            return new, k + 1, drift(new)
 
         def go_on(c):
-            st, k = c
-            return (k < n_steps) & ~needs_rebuild(st, drift(st)[2])
+            st, k, d = c
+            return (k < n_steps) & ~needs_rebuild(st, d[2])
 
         def segment(c):
-            st, k = jax.lax.while_loop(go_on, fast, c)
-            return jax.lax.cond(k < n_steps, lambda a: (step(a[0], "rebuild")[0], a[1] + 1),
-                                lambda a: a, (st, k))
+            c = jax.lax.while_loop(go_on, lambda c: advance(c, "keep"), c)
+            return jax.lax.cond(c[1] < n_steps, lambda c: advance(c, "rebuild"), lambda c: c, c)
 
         k0 = jnp.zeros_like(jnp.asarray(n_steps))
-        return jax.lax.while_loop(lambda c: c[1] < n_steps, segment, (state, k0))[0]
+        return jax.lax.while_loop(lambda c: c[1] < n_steps, segment,
+                                  (state, k0, drift(state)))[0]
 
     diag = jax.jit(partial(_chunk_diagnostics, lo=dom_lo, hi=dom_hi, periodic_axis=periodic_axis))
     return DEM(

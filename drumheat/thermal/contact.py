@@ -12,15 +12,19 @@ from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
 
 
-def pair_area(particles: ThermalParticles, i: Array, j: Array) -> Array:
-    """Transfer area of a pair: ``A_p = pi d^2 / 4`` of the smaller particle.
+def projected_area(d_i, d_j):
+    """Transfer area of a pair of diameters d_i, d_j: ``A_p = pi d^2 / 4`` of the smaller one.
 
     weigler-thermal-dem.md section 4 uses ``A_p = pi d_p^2 / 4`` for monodisperse beds (the PFC
     script takes the first ball's radius); for unequal sizes drumheat takes the smaller one, the
     neck of the heat bridge.
     """
-    d = jnp.minimum(particles.diameter[i], particles.diameter[j])
-    return 0.25 * jnp.pi * d**2
+    return 0.25 * jnp.pi * jnp.minimum(d_i, d_j) ** 2
+
+
+def pair_area(particles: ThermalParticles, i: Array, j: Array) -> Array:
+    """:func:`projected_area` of the pairs (i, j) of a bed."""
+    return projected_area(particles.diameter[i], particles.diameter[j])
 
 
 class ContactConduction(eqx.Module):
