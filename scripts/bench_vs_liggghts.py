@@ -28,10 +28,12 @@ Procedure for each N:
    kernel (the default, every backend) and with the C++ contact loop
    (``make_dem(pair_kernel="cpu")``, :mod:`drumheat.mechanics.cpu_kernel`) where it can be built.
 
-Output: a table N x code x ranks with particle-steps/s and the ratio to drumheat (and the
-machine load seen before each timing; the machine has 2 shared cores, so compare only rows
-measured at low load). drumheat runs on whatever JAX device is default (CPU here: it uses
-both cores through XLA's intra-op threads, so its fair LIGGGHTS partner is the 2-rank run).
+Output: a table N x code x ranks with particle-steps/s and the ratio to drumheat, the machine
+load seen before each timing and the CPU steal during it (the share of CPU time a hypervisor
+gave to other guests: on a shared virtual machine a timing with much steal is slow for reasons
+outside both codes; compare rows with little). drumheat runs on whatever JAX device is
+default (CPU here: it uses both cores through XLA's intra-op threads, so its fair LIGGGHTS
+partner is the 2-rank run).
 
 Usage: python scripts/bench_vs_liggghts.py [--n 2000 10000 50000] [--steps S] [--quick]
        [--ranks 1 2] [--workdir DIR] [--no-liggghts] [--thermal on|off]
@@ -80,6 +82,27 @@ def mpirun(np_):
 
 def load():
     return os.getloadavg()[0]
+
+
+def cpu_ticks():
+    """(steal, total) CPU ticks of the machine from /proc/stat (None off Linux)."""
+    try:
+        f = [int(v) for v in Path("/proc/stat").read_text().split("\n")[0].split()[1:]]
+    except (OSError, ValueError):
+        return None
+    return f[7], sum(f)
+
+
+def steal_percent(t0, t1):
+    """Share of CPU time the hypervisor gave to other guests between two cpu_ticks(), %.
+
+    On a shared virtual machine this, not the load average, tells a slow timing: on the
+    development machine the same setting ran up to 2x slower in runs with much steal than in
+    runs with almost none.
+    """
+    if t0 is None or t1 is None or t1[1] == t0[1]:
+        return float("nan")
+    return 100.0 * (t1[0] - t0[0]) / (t1[1] - t0[1])
 
 
 def run_liggghts(args, cwd, log, np_=1, timeout=None):
@@ -170,25 +193,29 @@ def time_drumheat(dat, steps, warm, thermal, pair_kernel="jax"):
     t_warm = time.perf_counter() - t0
     ld = load()
     r0 = int(state.n_rebuilds)
+    c0 = cpu_ticks()
     t0 = time.perf_counter()
     out = dem.run(state, steps, chunk=steps)
     jax.block_until_ready(out.position)
     wall = time.perf_counter() - t0
+    steal = steal_percent(c0, cpu_ticks())
     extra = ""
     if thermal:
         e = float(jnp.sum(out.extra * dem.particles.mass * C_P)
                   - jnp.sum(state.extra * dem.particles.mass * C_P))
         extra = f"change of the heat content {e:.2e} J (conduction only: round-off)"
-    return dict(rate=n * steps / wall, wall=wall, load=ld, warm_s=t_warm,
+    return dict(rate=n * steps / wall, wall=wall, load=ld, steal=steal, warm_s=t_warm,
                 rebuilds=int(out.n_rebuilds) - r0, note=extra)
 
 
 def time_liggghts(rst, work, n, steps, warm, ranks, thermal):
     log = f"logs/bench_N{n}_np{ranks}_{thermal}.log"
     ld = load()
+    c0 = cpu_ticks()
     run_liggghts(["-in", "in.bench", "-var", "in", str(rst.relative_to(work)), "-var", "nwarm",
                   str(warm), "-var", "nsteps", str(steps), "-var", "thermal", thermal], work,
                  log, ranks)
+    steal = steal_percent(c0, cpu_ticks())  # over the whole call (read, warm-up, timed)
     txt = (work / log).read_text()
     loops = re.findall(r"^Loop time of ([0-9.eE+-]+) on (\d+) procs for (\d+) steps with (\d+)",
                        txt, re.M)
@@ -196,7 +223,7 @@ def time_liggghts(rst, work, n, steps, warm, ranks, thermal):
     t, s, na = float(t), int(s), int(na)
     if na != n:
         print(f"  warning: LIGGGHTS has {na} atoms (expected {n})")
-    return dict(rate=na * s / t, wall=t, load=ld, note="")
+    return dict(rate=na * s / t, wall=t, load=ld, steal=steal, note="")
 
 
 def main():
@@ -253,21 +280,23 @@ def main():
             code = f"drumheat ({'JAX' if kernel == 'jax' else 'C++'} kernel)"
             rows.append((n, code, "-", steps, r))
             print(f"  N={n} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
-                  f"{r['load']:.2f}, rebuilds {r['rebuilds']}) {r['note']}", flush=True)
+                  f"{r['load']:.2f}, steal {r['steal']:.0f} %, rebuilds {r['rebuilds']}) "
+                  f"{r['note']}", flush=True)
         if have_lig and not args.no_liggghts:
             for k in args.ranks:
                 r = time_liggghts(rst, work, n, steps, warm, k, args.thermal)
                 rows.append((n, "LIGGGHTS", str(k), steps, r))
                 print(f"  N={n} LIGGGHTS {k} rank(s): {r['rate']:.3g} p-steps/s "
-                      f"({r['wall']:.1f} s, load {r['load']:.2f})", flush=True)
+                      f"({r['wall']:.1f} s, load {r['load']:.2f}, steal {r['steal']:.0f} %)",
+                      flush=True)
     print()
     print("| N | code | ranks | timed steps | wall s | particle-steps/s | rate / drumheat "
-          "| load before |")
-    print("|---|---|---|---|---|---|---|---|")
+          "| load before | CPU steal % |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for n, code, ranks, steps, r in rows:
         ref = next(x[4]["rate"] for x in rows if x[0] == n and x[1].startswith("drumheat"))
         print(f"| {n} | {code} | {ranks} | {steps} | {r['wall']:.2f} | {r['rate']:.3g} | "
-              f"{r['rate'] / ref:.2f} | {r['load']:.2f} |")
+              f"{r['rate'] / ref:.2f} | {r['load']:.2f} | {r['steal']:.0f} |")
 
 
 if __name__ == "__main__":

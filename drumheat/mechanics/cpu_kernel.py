@@ -97,7 +97,7 @@ def load() -> str:
 
 
 def check_supported(dim, params, dtype, batch_axis) -> None:
-    """Raise ValueError naming the first reason why ``pair_kernel="cpu"`` cannot serve."""
+    """Raise ValueError naming every reason why ``pair_kernel="cpu"`` cannot serve."""
     reasons = []
     if dim != 3:
         reasons.append("it is written for 3D (dim = 3)")
@@ -128,8 +128,8 @@ def contacts(pos, vel, omega, radius, mass, idx, spring, wall_distance, wall_nor
       idx: (2, M) OrderedSparse neighbour pairs (padding N); spring: (M, 3) tangential springs.
       wall_distance: (N, W) distance of each particle centre from each wall; wall_normal:
         (N, W, 3) unit normal from the wall towards the particle; wall_velocity: (N, W, 3)
-        velocity of the wall surface at the particle; wall_spring: (N, W, 3) tangential springs
-        (what :meth:`drumheat.geometry.walls.Wall.evaluate` returns, stacked over the walls).
+        velocity of the wall surface at the particle (the three outputs of each wall's
+        ``evaluate``, stacked over the walls); wall_spring: (N, W, 3) tangential springs.
       wall_params: (5, W) per wall ``kn, kt, zeta_n, zeta_t, mu``.
       kn, kt, zeta_n, zeta_t, mu, dt: particle-particle contact parameters as in
         :func:`drumheat.mechanics.contact_forces.contact_law`; periodic_length of z or None.
