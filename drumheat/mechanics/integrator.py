@@ -538,7 +538,7 @@ def make_dem(
       pair_kernel: ``"jax"`` (default; every backend, vmap, any material table) or ``"cpu"``:
         the particle-particle and particle-wall contacts (and the conduction) in one C++ loop
         on XLA's CPU threads, called through ``jax.ffi`` (:mod:`drumheat.mechanics.cpu_kernel`;
-        the DEM step 3-5x faster on CPU, docs/performance.md; 3D, one material, no rolling
+        the DEM step 2.3-5.9x faster on CPU, docs/performance.md; 3D, one material, no rolling
         resistance, float32, single runs; compiled with g++ on first use). Same contact law;
         results agree with ``"jax"`` to float32 round-off.
       conduction: :class:`~drumheat.mechanics.conduction.PairConduction`: heat conduction
