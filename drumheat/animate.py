@@ -56,6 +56,14 @@ def _format(out, fmt) -> str:
     return fmt
 
 
+def _register(result_dir, path: Path) -> None:
+    """Record ``path`` in the result folder's manifest when it lies directly inside it."""
+    from drumheat.io import register_outputs
+
+    if Path(path).resolve().parent == Path(result_dir).resolve():
+        register_outputs(result_dir, [Path(path).name])
+
+
 def animate(result_dir, out=None, fps: float = 10, fmt: str | None = None, dpi: int = 100,
             every: int = 1, vmin: float | None = None, vmax: float | None = None) -> Path:
     """Write an animation of a run: particles to scale, coloured by temperature, and a clock.
@@ -138,6 +146,7 @@ def animate(result_dir, out=None, fps: float = 10, fmt: str | None = None, dpi: 
                 draw(k)
                 writer.grab_frame()
         tmp.replace(out)
+        _register(result_dir, out)
     except FileNotFoundError as err:  # ffmpeg executable vanished
         raise AnimationError(f"could not run ffmpeg ({err}); write a GIF instead") from None
     finally:

@@ -23,12 +23,12 @@ def _cmd_scenes(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    from drumheat.io import default_out_dir
+    from drumheat.io import check_out_dir, default_out_dir
     from drumheat.runner import run
     from drumheat.scene import load_scene
 
     scene = load_scene(args.scene, args.set)
-    out = args.out or default_out_dir(scene.name)
+    out = check_out_dir(args.out if args.out is not None else default_out_dir(scene.name))
     result = run(scene, progress=not args.quiet)
     folder = result.save(out)
     s = result.summary
@@ -118,12 +118,13 @@ def _fail(message: str) -> int:
 
 def main(argv=None) -> int:
     """Entry point of the ``drumheat`` command; returns the exit code."""
+    from drumheat.io import ResultFolderError
     from drumheat.scene import SceneError
 
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except SceneError as err:
+    except (SceneError, ResultFolderError) as err:
         return _fail(str(err))
     except (FileNotFoundError, IsADirectoryError, PermissionError) as err:
         return _fail(str(err))

@@ -153,6 +153,10 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         scene = load_scene(scene, overrides)
     elif overrides:
         scene = scene.with_overrides(overrides)
+    if out is not None:
+        from drumheat.io import check_out_dir
+
+        check_out_dir(out)  # before the run, not after it
     start = time.perf_counter()
     motion = make_motion(scene)
     mesh = None

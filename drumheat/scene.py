@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.resources
 import math
+import re
 import tomllib
 import types
 import typing
@@ -861,8 +862,16 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, value
 
 
+#: what a scene name may look like: it names the default result folder results/<name>
+_NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")
+
+
 def _check_consistency(s: Scene) -> None:
     n = s.name
+    if not _NAME_PATTERN.fullmatch(n) or ".." in n:
+        raise SceneError("name", n, "must be a plain file name (letters, digits and _ . + -, "
+                         "not starting with '.' or '-'): it names the result folder "
+                         "results/<name>", None)
     if s.run.output_interval > s.run.duration:
         raise SceneError("run.output_interval", s.run.output_interval,
                          f"must be <= run.duration = {s.run.duration:g} s", n)

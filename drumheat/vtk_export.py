@@ -293,4 +293,8 @@ def export_vtk(result_dir, out_dir=None, binary: bool = True, n_segments: int = 
             shutil.move(str(f), out / f.name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    if out.resolve().parent == Path(result_dir).resolve():
+        from drumheat.io import register_outputs
+
+        register_outputs(result_dir, [out.name])
     return out / "particles.pvd"

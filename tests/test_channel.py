@@ -168,7 +168,7 @@ def test_march_gas_is_the_cellwise_exponential():
     T_nodes, T_eff = march_gas(G, G * T, 290.0, 1.5)
     Tin = 290.0
     for k in range(4):
-        Tb = T[k]
+        Tb = float(T[k])  # a Python float: pytest.approx must not be handed a JAX array
         Tout = Tb + (Tin - Tb) * math.exp(-float(G[k]) / 1.5) if G[k] > 0 else Tin
         assert float(T_nodes[k + 1]) == pytest.approx(Tout, rel=1e-14)
         if G[k] > 0:  # what the particles get is what the gas gives
