@@ -19,6 +19,10 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+from drumheat import _aliases  # noqa: E402
+
+_aliases.install()
+
 __version__ = "0.1.0"
 
 _LAZY = {
@@ -26,11 +30,11 @@ _LAZY = {
     "Scene": "drumheat.scene",
     "SceneError": "drumheat.scene",
     "builtin_scenes": "drumheat.scene",
-    "run": "drumheat.runner",
-    "Result": "drumheat.runner",
+    "run": "drumheat.runner.loop",
+    "Result": "drumheat.runner.loop",
     "materials": "drumheat.materials",
-    "run_ensemble": "drumheat.ensemble",
-    "EnsembleResult": "drumheat.ensemble",
+    "run_ensemble": "drumheat.runner.ensemble",
+    "EnsembleResult": "drumheat.runner.ensemble",
 }
 
 

@@ -23,8 +23,8 @@ def _cmd_scenes(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    from drumheat.io import check_out_dir, default_out_dir
-    from drumheat.runner import run
+    from drumheat.results.files import check_out_dir, default_out_dir
+    from drumheat.runner.loop import run
     from drumheat.scene import load_scene
 
     scene = load_scene(args.scene, args.set)
@@ -43,7 +43,7 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_explain(args) -> int:
-    from drumheat.advisor import explain
+    from drumheat.analysis.advisor import explain
     from drumheat.scene import load_scene
 
     print(explain(load_scene(args.scene, args.set)).text())
@@ -51,7 +51,7 @@ def _cmd_explain(args) -> int:
 
 
 def _cmd_animate(args) -> int:
-    from drumheat.animate import AnimationError, animate
+    from drumheat.results.animate import AnimationError, animate
 
     try:
         out = animate(args.result_dir, out=args.out, fps=args.fps, fmt=args.format,
@@ -63,7 +63,7 @@ def _cmd_animate(args) -> int:
 
 
 def _cmd_export_vtk(args) -> int:
-    from drumheat.vtk_export import export_vtk
+    from drumheat.results.vtk import export_vtk
 
     pvd = export_vtk(args.result_dir, out_dir=args.out, binary=not args.ascii)
     print(f"ParaView files in {pvd.parent}/ (open {pvd.name}; walls in walls.vtp)")
@@ -118,7 +118,7 @@ def _fail(message: str) -> int:
 
 def main(argv=None) -> int:
     """Entry point of the ``drumheat`` command; returns the exit code."""
-    from drumheat.io import ResultFolderError
+    from drumheat.results.files import ResultFolderError
     from drumheat.scene import SceneError
 
     args = build_parser().parse_args(argv)

@@ -40,7 +40,7 @@ NOTEBOOKS = {
     ],
     "02_heat_loss_fit.ipynb": [
         new_markdown_cell(
-            "# Fitting the heat-loss parameter (alpha A)_WK\n\n`drumheat.calibrate.fit` fits "
+            "# Fitting the heat-loss parameter (alpha A)_WK\n\n`drumheat.analysis.calibrate.fit` fits "
             "scene parameters by gradients of the whole simulation (jax.jacfwd through the run) "
             "with optax. The data here are the **synthetic** curves shipped with drumheat "
             "(generated with (alpha A)_WK = 2.5e-4 W/K and 0.15 K noise by "
@@ -48,7 +48,7 @@ NOTEBOOKS = {
         new_code_cell(
             "from importlib.resources import files\n"
             "import pandas as pd\n"
-            "from drumheat.calibrate import Experiment, fit, CalibrationDataError\n"
+            "from drumheat.analysis.calibrate import Experiment, fit, CalibrationDataError\n"
             "data = files('drumheat') / 'data'\n"
             "# the heating curve only, to keep the notebook short; add the cooling curve as a\n"
             "# second Experiment('weigler-cooling', data / 'synthetic_cooling.csv')\n"
@@ -74,7 +74,7 @@ NOTEBOOKS = {
             "(else its inflection point). A coarse time grid keeps this notebook short; the "
             "script `scripts/calibrate_lambda_bed.py` uses the full one."),
         new_code_cell(
-            "from drumheat.calibrate import calibrate_lambda_bed\n"
+            "from drumheat.analysis.calibrate import calibrate_lambda_bed\n"
             "cal = calibrate_lambda_bed('weigler-glass-wall', [57.0, 114.0], n_times=80,\n"
             "                           rho_bed=1230.0, convention='A7')\n"
             "print('line: lambda_bed = %.5g alpha_pp + %.4g' % (cal.line.slope, cal.line.intercept))\n"
@@ -102,8 +102,8 @@ NOTEBOOKS = {
             "from pathlib import Path\n"
             "import matplotlib.pyplot as plt\n"
             "import drumheat as dh\n"
-            "from drumheat import plot\n"
-            "from drumheat.animate import animate\n"
+            "from drumheat.results import plot\n"
+            "from drumheat.results.animate import animate\n"
             "\n"
             "short = {'run.duration': 120.0, 'run.output_interval': 1.0, 'dem.replay_after': 5.0}\n"
             "mixed = dh.run(dh.load_scene('weigler-mixed', short), progress=False)\n"
@@ -119,7 +119,7 @@ NOTEBOOKS = {
             "      ts.loc[dem_part, 'interfraction_contacts'].tolist())\n"
             "ts[['t', 'T_mean', 'T_mean:cold', 'T_mean:warm']].iloc[::20]"),
         new_markdown_cell(
-            "## Animation\n\n`drumheat.animate.animate` (or `drumheat animate RESULT_DIR` on "
+            "## Animation\n\n`drumheat.results.animate.animate` (or `drumheat animate RESULT_DIR` on "
             "the command line) writes one frame per output time from the result folder; "
             "`every=2` keeps every second output. The first 5 s are the DEM run itself; after "
             "that the frames show the recorded positions of the replayed revolution."),
@@ -157,12 +157,12 @@ NOTEBOOKS = {
     "05_effects.ipynb": [
         new_markdown_cell(
             "# Which effects matter? Advisor, radiation and internal conduction\n\n"
-            "`drumheat.advisor.explain` (command line: `drumheat explain SCENE`) estimates, for "
+            "`drumheat.analysis.advisor.explain` (command line: `drumheat explain SCENE`) estimates, for "
             "a scene's start conditions, the heat flow of every effect per particle, included or "
             "not, and says which included ones could be dropped and which absent ones should be "
             "added; the Biot number tells whether the particles may be lumped."),
         new_code_cell(
-            "from drumheat.advisor import explain\n"
+            "from drumheat.analysis.advisor import explain\n"
             "print(explain('weigler-static').text())"),
         new_markdown_cell(
             "The resting aluminium bed: contact conduction dominates; convection and radiation "

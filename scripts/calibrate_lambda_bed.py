@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 
 import drumheat as dh
-from drumheat.calibrate import calibrate_lambda_bed
+from drumheat.analysis.calibrate import calibrate_lambda_bed
 
 
 def main(argv=None):

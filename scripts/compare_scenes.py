@@ -29,7 +29,8 @@ SHORT = {
     "fluidized-bed-coffee": {"run.duration": 20.0},
     "herz-sectional-drum": {"run.duration": 0.5, "run.output_interval": 0.25,
                             "groups.0.count": 800},
-    "kraychev-channel": {"run.duration": 0.1, "run.output_interval": 0.05},
+    "kraychev-channel": {"run.duration": 0.1, "run.output_interval": 0.05,
+                         "channel.steady_after": 0.05},
     "kraychev-tube-bundle": {"run.duration": 0.5, "run.output_interval": 0.25,
                              "hopper.settle_time": 0.2},
     "staltner-slag-particle": {},
@@ -59,7 +60,11 @@ def run_all(out: Path, only: list[str] | None) -> None:
             print(f"{name}: no short variant declared; skipped", flush=True)
             continue
         start = time.perf_counter()
-        res = dh.run(dh.load_scene(name, ov), progress=False)
+        try:
+            res = dh.run(dh.load_scene(name, ov), progress=False)
+        except Exception as err:  # noqa: BLE001 - report and go on with the next scene
+            print(f"{name}: FAILED {type(err).__name__}: {err}", flush=True)
+            continue
         res.timeseries.to_csv(out / f"{name}.csv", index=False, float_format="%.17g")
         np.savez(out / f"{name}.npz", t=res.t, T=res.T)
         print(f"{name}: {len(res.t)} outputs, {time.perf_counter() - start:.1f} s", flush=True)

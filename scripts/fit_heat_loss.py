@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from drumheat.calibrate import Experiment, fit
+from drumheat.analysis.calibrate import Experiment, fit
 
 C2K = 273.15
 

@@ -23,6 +23,7 @@ import typing
 def _table_docs() -> dict[str, str]:
     """``{table prefix: first docstring paragraph}`` for every table of a scene."""
     from drumheat import scene as sc
+    from drumheat.scene.spec import unwrap_optional
 
     out: dict[str, str] = {"": inspect.getdoc(sc.Scene).split("\n\n")[0]}
 
@@ -31,7 +32,7 @@ def _table_docs() -> dict[str, str]:
         for f in dataclasses.fields(cls):
             if f.metadata.get("internal"):
                 continue
-            tp, _ = sc._unwrap_optional(hints[f.name])
+            tp, _ = unwrap_optional(hints[f.name])
             if typing.get_origin(tp) is tuple:
                 tp, key = typing.get_args(tp)[0], f"{prefix}{f.name}.*"
             elif dataclasses.is_dataclass(tp):

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 import drumheat  # noqa: F401  (float64)
-from drumheat.mixing.pneumatic import PneumaticChannel, cocurrent_outlet
+from drumheat.motion.pneumatic import PneumaticChannel, cocurrent_outlet
 from drumheat.scene import load_scene
 from drumheat.thermal.convection import _air_clipped, nusselt_alpha
 

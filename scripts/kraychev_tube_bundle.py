@@ -4,7 +4,7 @@ Sweep of the scene ``kraychev-tube-bundle`` over slit widths S and materials
 (kraychev-tube-bundle.md Table 5.1.1: wheat 4.07 mm, glass 3 mm; S = 8, 12, 16 mm as in the
 rig's tests, section 2). Every case uses the scene's own set-up (a 5 d_p slice, friction 0.3,
 the insertion band 60 mm above the top tubes), the hopper slice is filled to ~8 mm above the
-top tubes (:func:`drumheat.mixing.moving_bed.particles_to_fill`), and the run is measured from
+top tubes (:func:`drumheat.motion.moving_bed.particles_to_fill`), and the run is measured from
 ``--measure-from`` to its end (:meth:`MovingBed.measure`):
 
 * ``W_p`` DEM on the hopper axis (the digest's definition, section 7) and from the slit
@@ -49,9 +49,9 @@ MATERIALS = {
 def run_case(name: str, S: float, duration: float, measure_from: float, out: Path,
              depth_factor: float = 5.0) -> dict:
     from drumheat.materials import material
-    from drumheat.mixing.moving_bed import particles_to_fill
+    from drumheat.motion.moving_bed import particles_to_fill
     from drumheat.models.moving_bed import alpha_tube_bundle, discharge_velocity
-    from drumheat.runner import energy_balance, make_motion
+    from drumheat.runner.loop import energy_balance, make_motion
     from drumheat.scene import load_scene
 
     m = MATERIALS[name]

@@ -2,7 +2,7 @@
 
 import pytest
 
-from drumheat.advisor import explain
+from drumheat.analysis.advisor import explain
 from drumheat.cli import main
 
 
@@ -43,7 +43,7 @@ def test_wall_layer_of_a_plain_drum_matches_the_segment_geometry():
     """DEM drum scenes (no contact network at t = 0) get the wall layer of their bed segment."""
     import math
 
-    from drumheat.advisor import _wall_layer_fraction
+    from drumheat.analysis.advisor import _wall_layer_fraction
     from drumheat.scene import load_scene
 
     scene = load_scene("weigler-glass-drum-9.55")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from drumheat.animate import AnimationError, animate
+from drumheat.results.animate import AnimationError, animate
 from drumheat.cli import main
 from drumheat.scene import load_scene
 

@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from drumheat.calibrate import (CalibrationDataError, Experiment, calibrate_lambda_bed, fit,
+from drumheat.analysis.calibrate import (CalibrationDataError, Experiment, calibrate_lambda_bed, fit,
                                 read_measurements)
-from drumheat.runner import make_motion
+from drumheat.runner.loop import make_motion
 from drumheat.scene import load_scene, scene_from_dict
 
 DATA = files("drumheat") / "data"

@@ -8,9 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from drumheat.mixing.pneumatic import PneumaticChannel, cocurrent_outlet, march_gas
+from drumheat.motion.pneumatic import PneumaticChannel, cocurrent_outlet, march_gas
 from drumheat.models import drag
-from drumheat.runner import energy_balance
+from drumheat.runner.loop import energy_balance
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 from drumheat.thermal.convection import _air_clipped, nusselt_alpha
 

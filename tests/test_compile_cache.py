@@ -27,18 +27,18 @@ def test_run_switches_the_cache_on_in_the_given_folder(tmp_path):
 
 
 def test_a_users_cache_folder_is_kept_and_off_means_off(tmp_path):
-    from drumheat.compile_cache import enable_compilation_cache  # noqa: F401 (importable)
+    from drumheat.runner.compile_cache import enable_compilation_cache  # noqa: F401 (importable)
 
     code = f"""
         import jax
         jax.config.update("jax_compilation_cache_dir", {str(tmp_path / 'mine')!r})
-        from drumheat.compile_cache import enable_compilation_cache
+        from drumheat.runner.compile_cache import enable_compilation_cache
         print(enable_compilation_cache())
     """
     assert _run(code, {"DRUMHEAT_CACHE_DIR": str(tmp_path / "ours")}) == str(tmp_path / "mine")
     code = """
         import jax
-        from drumheat.compile_cache import enable_compilation_cache
+        from drumheat.runner.compile_cache import enable_compilation_cache
         print(enable_compilation_cache(), jax.config.jax_compilation_cache_dir)
     """
     assert _run(code, {"DRUMHEAT_CACHE_DIR": "off"}) == "None None"

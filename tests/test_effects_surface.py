@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import drumheat as dh
-from drumheat.mixing.static import StaticBed
+from drumheat.motion.static import StaticBed
 from drumheat.models import convection as corr
 from drumheat.models.sphere_conduction import sphere_mean_temperature
 from drumheat.scene import SceneError, load_scene, scene_from_dict

@@ -1,4 +1,4 @@
-"""Ensembles (drumheat.run_ensemble) and sharding over several devices (drumheat.sharding).
+"""Ensembles (drumheat.run_ensemble) and sharding over several devices (drumheat.runner.sharding).
 
 The vmapped ensemble must give what ``drumheat.run`` gives for every variant; sharded runs
 (variant axis or particle axis over 4 simulated CPU devices) what one device gives. The
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import drumheat as dh
-from drumheat.ensemble import EnsembleWarning, expand_overrides
+from drumheat.runner.ensemble import EnsembleWarning, expand_overrides
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -149,8 +149,8 @@ SHARDED_SCRIPT = textwrap.dedent('''
     import numpy as np
     import jax
     import drumheat as dh
-    from drumheat.mixing.static import StaticBed
-    from drumheat.sharding import make_mesh, shard_particles
+    from drumheat.motion.static import StaticBed
+    from drumheat.runner.sharding import make_mesh, shard_particles
     sys.path.insert(0, {tests!r})
     from test_ensemble import dem_scene, static_scene
 
@@ -221,7 +221,7 @@ DEM_PARTICLES_SCRIPT = textwrap.dedent('''
     import numpy as np
     import jax
     import drumheat as dh
-    from drumheat.bed import initial_packing
+    from drumheat.assemble import initial_packing
     sys.path.insert(0, {tests!r})
     from test_ensemble import dem_scene
 

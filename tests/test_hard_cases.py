@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import drumheat as dh
-from drumheat.mixing.static import StaticBed
-from drumheat.runner import make_motion
+from drumheat.motion.static import StaticBed
+from drumheat.runner.loop import make_motion
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 from drumheat.thermal import internal
 from drumheat.thermal.integrate import initial_state

@@ -9,7 +9,7 @@ import pytest
 from drumheat.geometry.walls import DrumShell, InnerCylinder, RadialPlate
 from drumheat.mechanics.analysis import section_contact_lengths
 from drumheat.mechanics.pour import section_of
-from drumheat.mixing.dem import drum_walls
+from drumheat.motion.dem import drum_walls
 from drumheat.models.sectional_drum import bed_polygon, contact_lengths
 from drumheat.scene import SceneError, builtin_scenes, load_scene
 
@@ -43,9 +43,9 @@ def test_scene_is_listed_and_builds_ten_walls():
 
 
 def test_plain_drum_keeps_one_wall_account():
-    from drumheat.bed import scene_values
+    from drumheat.assemble import scene_values
     from drumheat.thermal.composer import make_thermal_model
-    from drumheat.bed import make_particles
+    from drumheat.assemble import make_particles
 
     scene = load_scene("weigler-glass-drum-9.55")
     assert scene.drum.heated_surfaces() == (("wall", "drum.wall_temperature"),)

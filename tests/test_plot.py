@@ -13,7 +13,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
 import drumheat as dh  # noqa: E402
-from drumheat import plot  # noqa: E402
+from drumheat.results import plot  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import drumheat as dh
-from drumheat.mixing.random import RandomBed
-from drumheat.runner import energy_balance, make_motion
+from drumheat.motion.random import RandomBed
+from drumheat.runner.loop import energy_balance, make_motion
 from drumheat.scene import load_scene, scene_from_dict
 
 

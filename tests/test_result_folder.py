@@ -11,7 +11,7 @@ import os
 import pytest
 
 from drumheat.cli import main
-from drumheat.io import MANIFEST, ResultFolderError, check_out_dir, write_results
+from drumheat.results.files import MANIFEST, ResultFolderError, check_out_dir, write_results
 from drumheat.scene import SceneError, load_scene
 
 QUICK = ["--quiet", "--set", "run.duration=60", "--set", "run.output_interval=30"]
@@ -101,7 +101,7 @@ def test_user_files_inside_a_result_folder_block_its_replacement(result, tmp_pat
 
 
 def test_an_animation_written_into_a_result_folder_is_registered(result, tmp_path):
-    from drumheat.io import register_outputs
+    from drumheat.results.files import register_outputs
 
     out = tmp_path / "res"
     write_results(result, out, figures=False)

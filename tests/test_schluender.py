@@ -46,7 +46,7 @@ def test_scene_model_schluender_matches_constant():
     for eff in ("contact", "wall"):
         raw["heat"][eff] = {"model": "schluender"}
     raw["gas"] = {"temperature": 303.15}
-    from drumheat.mixing.static import StaticBed
+    from drumheat.motion.static import StaticBed
     from drumheat.scene import scene_from_dict
 
     model, _ = StaticBed(scene_from_dict(raw)).model()

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 import drumheat as dh
-from drumheat.mixing.granulator import droplet_speed, path_geometry, wall_heat_per_mass
-from drumheat.runner import make_motion
+from drumheat.motion.granulator import droplet_speed, path_geometry, wall_heat_per_mass
+from drumheat.runner.loop import make_motion
 from drumheat.scene import load_scene
 
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import drumheat as dh
-from drumheat.mixing.static import StaticBed
-from drumheat.runner import energy_balance
+from drumheat.motion.static import StaticBed
+from drumheat.runner.loop import energy_balance
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 from drumheat.thermal.contact import ContactConduction
 from drumheat.thermal.integrate import _vector_field, initial_state

@@ -1,4 +1,4 @@
-"""Tests of the thermochromic measurement chain (drumheat.thermochromic).
+"""Tests of the thermochromic measurement chain (drumheat.experiments.thermochromic).
 
 Reference: reference/weigler-thermal-dem.md, section 8 (App. A1 tables, methods 1-3, classes)
 and section 12, items 15-17.
@@ -13,7 +13,7 @@ import pytest
 
 matplotlib.use("Agg")
 
-from drumheat import thermochromic as tc  # noqa: E402
+from drumheat.experiments import thermochromic as tc  # noqa: E402
 
 
 @pytest.fixture(scope="module")

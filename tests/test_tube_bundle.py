@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from drumheat.geometry.walls import FixedCylinder, Plane, Segment
-from drumheat.mixing.moving_bed import MovingBed, hopper_walls, particles_to_fill
-from drumheat.runner import build_timeseries, energy_balance
+from drumheat.motion.moving_bed import MovingBed, hopper_walls, particles_to_fill
+from drumheat.runner.loop import build_timeseries, energy_balance
 from drumheat.scene import SceneError, load_scene
 
 # a small, fast variant: one pitch deep in rows, 2 pitches wide, ~60 particles of 4 mm
@@ -82,7 +82,7 @@ def test_recycling_hook_resets_particle():
     pos = bed.packing_positions().copy()
     pos[0] = [0.0, bed.y_exit - 0.002, 0.005]
     state = dem.init(pos)
-    from drumheat.mixing.dem import initial_extra
+    from drumheat.motion.dem import initial_extra
 
     extra = initial_extra(model, T0, state.nbrs.idx.shape[1], bed.n, bed.n_walls,
                           per_wall=True, accounts=("inflow",))

@@ -7,7 +7,7 @@ import pytest
 
 from drumheat.cli import main
 from drumheat.scene import load_scene
-from drumheat.vtk_export import export_vtk, particle_velocities
+from drumheat.results.vtk import export_vtk, particle_velocities
 
 vtk = pytest.importorskip("vtk", reason="the vtk package (test extra) reads the files back")
 from vtk.util.numpy_support import vtk_to_numpy  # noqa: E402

@@ -1,6 +1,6 @@
 """Contact conduction computed in the DEM force loop, every mechanical step.
 
-drumheat's coupled thermal DEM (:mod:`drumheat.mixing.dem`) records contacts and advances the
+drumheat's coupled thermal DEM (:mod:`drumheat.motion.dem`) records contacts and advances the
 thermal network every few mechanical steps with the full set of heat paths. This module is the
 lean alternative for runs that want conduction through the touching pairs only, updated every
 step the way LIGGGHTS' ``fix heat/gran/conduction`` does it (``scripts/bench_vs_liggghts.py``

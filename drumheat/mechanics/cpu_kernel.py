@@ -47,7 +47,7 @@ _LOADED = False
 
 
 def _cache_dir() -> Path:
-    from drumheat.compile_cache import cache_dir_setting
+    from drumheat.runner.compile_cache import cache_dir_setting
 
     env = cache_dir_setting()  # a compiled kernel needs a folder even with the JAX cache off
     return (Path(env) if env else Path.home() / ".cache" / "drumheat") / "kernels"

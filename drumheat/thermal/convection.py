@@ -280,7 +280,7 @@ def build_convection(scene, value, particles: ThermalParticles, T_bounds) -> Con
     else:
         alpha = None
     if cfg.internal_resistance == "transient-sphere":
-        from drumheat.bed import group_index, group_property
+        from drumheat.assemble import group_index, group_property
 
         gi = group_index(scene)
         lam_p = jnp.stack([jnp.asarray(group_property(scene, value, k, "conductivity"), float)

@@ -156,7 +156,7 @@ class InternalConduction(eqx.Module):
 
 def build_internal(scene, value, particles) -> InternalConduction:
     """The :class:`InternalConduction` of ``scene`` (materials per group, shells from the scene)."""
-    from drumheat.bed import group_index, group_property
+    from drumheat.assemble import group_index, group_property
 
     cfg = scene.heat.internal
     grid = shells.make_grid(0.5 * particles.diameter, cfg.shells)

@@ -96,7 +96,7 @@ def granulator_sink_temperature(rho, z, granulator, surfaces, particle_emissivit
 
 def build_radiation(scene, value, particles: ThermalParticles, T_bounds) -> Radiation:
     """The :class:`Radiation` of ``scene``; for the granulator, T_rad at the disc centre."""
-    from drumheat.bed import group_index, group_property
+    from drumheat.assemble import group_index, group_property
 
     cfg = scene.heat.radiation
     N = particles.diameter.shape[0]
@@ -109,7 +109,7 @@ def build_radiation(scene, value, particles: ThermalParticles, T_bounds) -> Radi
     if cfg.enclosure == "sink":
         T_rad = jnp.full(N, jnp.asarray(value("heat.radiation.sink_temperature"), float))
     else:
-        from drumheat.mixing.granulator import path_geometry
+        from drumheat.motion.granulator import path_geometry
 
         z_disc = path_geometry(scene.granulator)["z_disc"]
         T_rad = jnp.full(N, granulator_sink_temperature(0.0, z_disc, scene.granulator,

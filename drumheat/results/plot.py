@@ -30,7 +30,7 @@ matplotlib.use("Agg") if matplotlib.get_backend().lower() == "agg" else None
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from drumheat import observe  # noqa: E402
+from drumheat.analysis import observe  # noqa: E402
 
 #: 0 degC in K.
 C0 = 273.15
@@ -245,7 +245,7 @@ def scene_walls(scene, t: float = 0.0) -> list[dict]:
     if scene is None:
         return []
     if scene.drum is None and getattr(scene, "hopper", None) is not None:
-        from drumheat.mixing.moving_bed import hopper_walls
+        from drumheat.motion.moving_bed import hopper_walls
 
         g = hopper_walls(scene.hopper)
         top = g.crest + scene.hopper.insertion_height
@@ -488,7 +488,7 @@ def plot_mean_temperatures(result, ax=None, data=None):
     ax : matplotlib.axes.Axes, optional
     data : pandas.DataFrame or path of a CSV file, optional
         Measured points: column ``t`` (s) and any of the time-series columns in K
-        (``T_mean``, ``T_mean:<group>``), as :func:`drumheat.thermochromic.fraction_means`
+        (``T_mean``, ``T_mean:<group>``), as :func:`drumheat.experiments.thermochromic.fraction_means`
         writes them.
 
     Returns
@@ -589,7 +589,7 @@ def plot_alpha_overall(result, ax=None, smooth=None):
     """Overall wall-to-bed coefficient (weigler eq. [1.10]) and its log-log slope over time.
 
     Top: alpha_overall, W/(m2 K), on log-log axes. Bottom: ``d ln alpha / d ln t``
-    (:func:`drumheat.observe.log_slope`) on a log time axis, with the ideal penetration
+    (:func:`drumheat.analysis.observe.log_slope`) on a log time axis, with the ideal penetration
     regime -0.5 marked.
 
     Parameters

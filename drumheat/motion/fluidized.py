@@ -27,15 +27,15 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.bed import group_index, initial_temperatures, make_particles, output_times, scene_values
+from drumheat.assemble import group_index, initial_temperatures, make_particles, output_times, scene_values
 from drumheat.models import convection as corr
-from drumheat.progress import SimProgress
+from drumheat.runner.progress import SimProgress
 from drumheat.scene import Scene
 from drumheat.thermal.composer import make_thermal_model
 from drumheat.thermal.convection import PlugFlowConvection, series_with_transient_sphere
 from drumheat.thermal.integrate import initial_state
 from drumheat.thermal.network import ContactNetwork
-from drumheat.trajectory import Trajectory
+from drumheat.motion.trajectory import Trajectory
 
 
 @eqx.filter_jit
@@ -81,7 +81,7 @@ class FluidizedBed:
         return t, np.isin(t, k)
 
     def _run(self, params=None, progress=None):
-        from drumheat.mixing.static import integrate_network
+        from drumheat.motion.static import integrate_network
 
         model, T0 = self.model(params)
         N = model.particles.diameter.shape[0]
@@ -116,7 +116,7 @@ class FluidizedBed:
         return model, keep, [layers_at[float(t)] for t in self.t_out]
 
     def solve(self, params=None, progress=None):
-        from drumheat.mixing.static import stack_states
+        from drumheat.motion.static import stack_states
 
         model, states, _ = self._run(params, progress)
         return stack_states(states, model.accounts, model)
@@ -129,7 +129,7 @@ class FluidizedBed:
         ``1/k = 1/alpha_i + 1/alpha_a``, ``A/f = 6 m_1/(d rho_1)``, ``NTU = k (A/f)/(mdot_2
         c_p,2)`` and the closed form ``T1(t)``. Uses the first group (equal spheres).
         """
-        from drumheat.bed import group_property
+        from drumheat.assemble import group_property
         from drumheat.materials import gas as gas_lib
 
         scene = self.scene
@@ -162,7 +162,7 @@ class FluidizedBed:
     def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
         with SimProgress(self.scene.run.duration, progress) as bar:
             model, states, layers = self._run(params, bar)
-        from drumheat.mixing.static import shell_stored_heat, stack_states
+        from drumheat.motion.static import shell_stored_heat, stack_states
 
         T, Q = stack_states(states, model.accounts, model)
         plug = self._plug(model)

@@ -28,19 +28,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.bed import (group_index, group_property, initial_packing, initial_temperatures,
+from drumheat.assemble import (group_index, group_property, initial_packing, initial_temperatures,
                           make_particles, output_times, scene_values)
 from drumheat.geometry.walls import DrumShell, InnerCylinder, RadialPlate
 from drumheat.materials import material
 from drumheat.mechanics import DEMError, contact_params, make_dem
 from drumheat.mechanics import make_particles as mechanical_particles
 from drumheat.mechanics.contact_forces import normal_stiffness_from_youngs
-from drumheat.progress import SimProgress
+from drumheat.runner.progress import SimProgress
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.composer import ThermalModel, make_thermal_model
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.wall import WallConduction
-from drumheat.trajectory import Trajectory
+from drumheat.motion.trajectory import Trajectory
 
 
 def _steps(interval: float, dt: float) -> int:
@@ -354,7 +354,7 @@ class DEMBed:
         cap = state.nbrs.idx.shape[1]
         state = state._replace(extra=initial_extra(model, T0, cap, self.n, len(self.walls)))
         if self.mesh is not None:  # positions, velocities, temperatures, springs split by particle
-            from drumheat.sharding import shard_particles
+            from drumheat.runner.sharding import shard_particles
 
             state = shard_particles(state, self.mesh, self.n)
         n_w = len(self.walls)
@@ -396,7 +396,7 @@ class DEMBed:
                 bar.update_to(t_end)
             n_rest = len(self.t_out) - 1 - n_coupled
             if n_rest > 0:  # cyclic replay of what was recorded
-                from drumheat.mixing.replay import Recording
+                from drumheat.motion.replay import Recording
 
                 cfg = self.scene.dem
                 cycle = cfg.replay_cycle if cfg.replay_cycle is not None else 0.5 * replay_after
@@ -446,7 +446,7 @@ class DEMBed:
 
     def _interfraction(self, positions) -> np.ndarray:
         """Contacts between the two groups at each output time (mixing observable)."""
-        from drumheat.observe import count_interfraction_contacts
+        from drumheat.analysis.observe import count_interfraction_contacts
         from scipy.spatial import cKDTree
 
         counts = []

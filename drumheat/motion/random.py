@@ -20,7 +20,7 @@ rest time, eq. [1.1]) the bed is re-mixed instantly:
   stored heat to round-off (one floating-point division), and positions stay fixed.
 
 Between re-mixings the balance [2.13]/[5.2] is integrated on the fixed network exactly as for
-:class:`~drumheat.mixing.static.StaticBed`. Re-mixing times are ``t_R, 2 t_R, ...`` strictly
+:class:`~drumheat.motion.static.StaticBed`. Re-mixing times are ``t_R, 2 t_R, ...`` strictly
 before the last output time; output times need not coincide with them: the integration runs
 piecewise over the union of both grids. An output at a re-mixing time records the state just
 *before* the re-mix (for ``"permute"`` the temperatures are the same either side; only the
@@ -38,13 +38,13 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.bed import group_index
-from drumheat.mixing.static import StaticBed, integrate_network, stack_states
-from drumheat.progress import SimProgress
+from drumheat.assemble import group_index
+from drumheat.motion.static import StaticBed, integrate_network, stack_states
+from drumheat.runner.progress import SimProgress
 from drumheat.scene import Scene
 from drumheat.thermal.integrate import initial_state
 from drumheat.thermal.network import ContactNetwork
-from drumheat.trajectory import Trajectory
+from drumheat.motion.trajectory import Trajectory
 
 
 class RandomBed(StaticBed):

@@ -49,8 +49,8 @@ import numpy as np
 import optax
 import pandas as pd
 
-from drumheat import observe
-from drumheat.bed import group_index
+from drumheat.analysis import observe
+from drumheat.assemble import group_index
 from drumheat.scene import Scene, load_scene
 
 __all__ = [
@@ -398,7 +398,7 @@ class _Prepared:
 
 
 def _prepare(experiments, data, keys):
-    from drumheat.runner import make_motion
+    from drumheat.runner.loop import make_motion
 
     if isinstance(experiments, (Scene, str, Path)):
         if data is None:
@@ -685,7 +685,7 @@ class LambdaBedPoint:
         Read-off time, s.
     criterion : str
         "slope" (the log-log slope reaches -0.5) or "inflection" (extremum of the slope curve,
-        the A7 fallback), see :func:`drumheat.observe.penetration_time`.
+        the A7 fallback), see :func:`drumheat.analysis.observe.penetration_time`.
     slope_at_time : float
         Slope of the curve used at ``time``.
     alpha_overall, alpha_bed : float
@@ -739,7 +739,7 @@ class LambdaBedCalibration:
 
     Attributes
     ----------
-    line : drumheat.observe.CalibrationLine
+    line : drumheat.analysis.observe.CalibrationLine
         ``lambda_bed = slope * alpha_pp + intercept``.
     points : list of LambdaBedPoint
     rho_bed, c_bed : float
@@ -845,7 +845,7 @@ class _LambdaContext:
 
     def __init__(self, scene, rho_bed, c_bed, alpha_ws, slope_of, times, t_range, which,
                  smooth):
-        from drumheat.runner import make_motion
+        from drumheat.runner.loop import make_motion
 
         self.scene = scene
         self.motion = make_motion(scene)
@@ -926,7 +926,7 @@ def calibrate_lambda_bed(scene: Scene | str, alpha_pp_values: Sequence[float], *
     2. ``alpha_bed(t)`` from eq. [1.6], ``1/alpha_bed = 1/alpha_overall - 1/alpha_ws``;
     3. the log-log slope of ``alpha_overall`` (``slope_of="overall"``, the thesis text; the
        A7/A8 scripts take alpha_bed's, digest item 12.10), and the read-off time where it
-       reaches -0.5, else its inflection point (:func:`drumheat.observe.penetration_time`);
+       reaches -0.5, else its inflection point (:func:`drumheat.analysis.observe.penetration_time`);
     4. ``lambda_bed = alpha_bed^2 pi t / (4 rho_bed c_bed)`` (eq. [5.1]) at that time,
        evaluated by a run to exactly that time.
 
@@ -966,7 +966,7 @@ def calibrate_lambda_bed(scene: Scene | str, alpha_pp_values: Sequence[float], *
     t_min : float
         First time of the grid, s.
     t_range, which, smooth :
-        Passed to :func:`drumheat.observe.penetration_time`.
+        Passed to :func:`drumheat.analysis.observe.penetration_time`.
     through_origin : bool
         Fit the line through the origin.
 

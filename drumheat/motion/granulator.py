@@ -43,15 +43,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.bed import group_index, initial_temperatures, make_particles, scene_values
+from drumheat.assemble import group_index, initial_temperatures, make_particles, scene_values
 from drumheat.models.sphere_conduction import contact_temperature, effusivity
-from drumheat.progress import SimProgress
+from drumheat.runner.progress import SimProgress
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal import internal, shells
 from drumheat.thermal.composer import make_thermal_model
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.radiation import Radiation, granulator_sink_temperature
-from drumheat.trajectory import Trajectory
+from drumheat.motion.trajectory import Trajectory
 
 PHASES = ("flight", "wall contact", "fall")
 

@@ -202,7 +202,7 @@ def write_results(result, out_dir=None, figures: bool = True) -> Path:
         for name, writer in traj.files.items():  # the motion model's own files
             writer(tmp / name)
         if figures:
-            from drumheat import plot
+            from drumheat.results import plot
 
             plot.save_figures(result, tmp)
         _write_manifest(tmp, [p.name for p in tmp.iterdir()])

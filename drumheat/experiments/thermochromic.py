@@ -59,7 +59,7 @@ your own points to :func:`fit_calibration`.
 
 Example
 -------
->>> from drumheat import thermochromic as tc
+>>> from drumheat.experiments import thermochromic as tc
 >>> cal = tc.calibration("combined")          # PCHIP through Table A1.3
 >>> float(cal(101.0))                         # a table point: 40 degC
 40.0

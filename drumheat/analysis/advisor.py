@@ -102,7 +102,7 @@ def _props(scene):
 
 def explain(scene) -> Advice:
     """Sizes of all effects for ``scene`` (a Scene, a built-in name or a path)."""
-    from drumheat.runner import make_motion
+    from drumheat.runner.loop import make_motion
     from drumheat.scene import Scene, load_scene
 
     if not isinstance(scene, Scene):
@@ -150,7 +150,7 @@ def explain(scene) -> Advice:
     terms.append(contact)
     # wall
     if scene.motion.model == "granulator":
-        from drumheat.mixing.granulator import wall_heat_per_mass
+        from drumheat.motion.granulator import wall_heat_per_mass
         from drumheat.models.sphere_conduction import effusivity
 
         g = scene.granulator
@@ -310,7 +310,7 @@ def _wall_layer_fraction(scene, d):
     area_p = sum(g.count * math.pi * g.diameter**2 / 4 for g in scene.groups)
     beta, phi2 = 0.6, 0.8
     if scene.motion.model == "moving_bed":
-        from drumheat.mixing.moving_bed import hopper_walls
+        from drumheat.motion.moving_bed import hopper_walls
 
         h = scene.hopper
         g = hopper_walls(h)

@@ -13,20 +13,33 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from drumheat import observe
-from drumheat.scene import MOTION_MODELS, Scene, load_scene
-from drumheat.trajectory import Trajectory
+from drumheat.analysis import observe
+from drumheat.scene import Scene, load_scene
+from drumheat.motion.trajectory import Trajectory
 
 
 def make_motion(scene: Scene):
     """The motion-model object of a scene (``StaticBed``, ...); it builds packing and contacts.
 
-    The registry is :data:`drumheat.scene.MOTION_MODELS`. Every motion model offers
+    Every motion model offers
     ``solve(params) -> (T, Q)`` (differentiable) and ``trajectory(params, progress) ->
     Trajectory``.
     """
-    module, cls = MOTION_MODELS[scene.motion.model].split(":")
+    module, cls = _MOTION_CLASSES[scene.motion.model].split(":")
     return getattr(importlib.import_module(module), cls)(scene)
+
+
+#: Motion models and the class implementing each ("module:Class", imported on use).
+_MOTION_CLASSES = {
+    "static": "drumheat.motion.static:StaticBed",
+    "random": "drumheat.motion.random:RandomBed",
+    "granulator": "drumheat.motion.granulator:GranulatorParticle",
+    "fluidized": "drumheat.motion.fluidized:FluidizedBed",
+    "dem": "drumheat.motion.dem:DEMBed",
+    "replay": "drumheat.motion.replay:ReplayBed",
+    "pneumatic": "drumheat.motion.pneumatic:PneumaticChannel",
+    "moving_bed": "drumheat.motion.moving_bed:MovingBed",
+}
 
 
 @dataclass
@@ -62,7 +75,7 @@ class Result:
 
     def save(self, out_dir: str | Path | None = None, figures: bool = True) -> Path:
         """Write the result files (see DESIGN.md) to ``out_dir`` (default results/<scene>)."""
-        from drumheat.io import write_results
+        from drumheat.results.files import write_results
 
         return write_results(self, out_dir, figures=figures)
 
@@ -120,7 +133,7 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     """Run a scene and return its :class:`Result`; write result files if ``out`` is given.
 
     Compiled programs are kept in JAX's persistent compilation cache
-    (:mod:`drumheat.compile_cache`; ``DRUMHEAT_CACHE_DIR=off`` leaves it alone), so running
+    (:mod:`drumheat.runner.compile_cache`; ``DRUMHEAT_CACHE_DIR=off`` leaves it alone), so running
     the same scene again does not compile again.
 
     Parameters
@@ -138,7 +151,7 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         Dotted-key overrides applied and validated before the run.
     devices : None, "all", int or list of jax.Device, optional
         Split the particle arrays (temperatures, positions, velocities, particle properties)
-        over these devices (:func:`drumheat.sharding.shard_particles`; motion models
+        over these devices (:func:`drumheat.runner.sharding.shard_particles`; motion models
         ``static`` and ``dem``). The results equal those of one device to round-off; the
         particle count should be a multiple of the device count. Default: one device. This
         splits memory, not time: a DEM step on 2 simulated CPU devices was 2.1x slower at
@@ -146,7 +159,7 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         many variants of a scene use :func:`drumheat.run_ensemble`, which splits the
         variants over the devices instead.
     """
-    from drumheat.compile_cache import enable_compilation_cache
+    from drumheat.runner.compile_cache import enable_compilation_cache
 
     enable_compilation_cache()
     if not isinstance(scene, Scene):
@@ -154,14 +167,14 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     elif overrides:
         scene = scene.with_overrides(overrides)
     if out is not None:
-        from drumheat.io import check_out_dir
+        from drumheat.results.files import check_out_dir
 
         check_out_dir(out)  # before the run, not after it
     start = time.perf_counter()
     motion = make_motion(scene)
     mesh = None
     if devices is not None:
-        from drumheat.sharding import make_mesh, resolve_devices
+        from drumheat.runner.sharding import make_mesh, resolve_devices
 
         devs = resolve_devices(devices)
         if devs is not None and len(devs) > 1:

@@ -25,7 +25,7 @@ ParaView (or any VTK reader) opens directly, written with numpy and the standard
   3D a cylinder surface of radius D/2 and length ``drum.depth`` along z, placed over the
   particles (``0 <= z <= depth`` if no particle centre lies below z = 0, else centred on
   z = 0). Radial plates will become a line (2D) or a quad (3D) once scenes declare them
-  (:func:`drumheat.plot.scene_walls`).
+  (:func:`drumheat.results.plot.scene_walls`).
 
 Coordinates follow DESIGN.md: drum axis through the origin (z in 3D), gravity along -y,
 metres.
@@ -158,7 +158,7 @@ def wall_geometry(walls, dim, z_range=(0.0, 0.0), n_segments=128):
     Parameters
     ----------
     walls : sequence
-        Wall descriptions (:func:`drumheat.plot.wall_description`).
+        Wall descriptions (:func:`drumheat.results.plot.wall_description`).
     dim : {2, 3}
         2: circles as closed polylines and plates as lines in z = 0; 3: cylinder surfaces
         (quads) and plates (one quad) between ``z_range``.
@@ -172,7 +172,7 @@ def wall_geometry(walls, dim, z_range=(0.0, 0.0), n_segments=128):
     points : ndarray (P, 3)
     lines, polys : list of index lists
     """
-    from drumheat.plot import wall_description
+    from drumheat.results.plot import wall_description
 
     points, lines, polys = [], [], []
     z0, z1 = map(float, z_range)
@@ -241,13 +241,13 @@ def export_vtk(result_dir, out_dir=None, binary: bool = True, n_segments: int = 
 
     Raises
     ------
-    drumheat.plot.ResultFolderError
+    drumheat.results.plot.ResultFolderError
         Missing folder, ``particles.npz`` or arrays (a :class:`FileNotFoundError`).
     """
     import shutil
     import tempfile
 
-    from drumheat.plot import read_particles, scene_walls
+    from drumheat.results.plot import read_particles, scene_walls
 
     frames = read_particles(result_dir)
     out = Path(out_dir) if out_dir is not None else Path(result_dir) / "vtk"
@@ -294,7 +294,7 @@ def export_vtk(result_dir, out_dir=None, binary: bool = True, n_segments: int = 
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     if out.resolve().parent == Path(result_dir).resolve():
-        from drumheat.io import register_outputs
+        from drumheat.results.files import register_outputs
 
         register_outputs(result_dir, [out.name])
     return out / "particles.pvd"

@@ -11,15 +11,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.bed import (group_index, initial_packing, initial_temperatures, make_particles,
+from drumheat.assemble import (group_index, initial_packing, initial_temperatures, make_particles,
                           output_times, scene_values)
-from drumheat.progress import SimProgress
+from drumheat.runner.progress import SimProgress
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.composer import ThermalModel, make_thermal_model
 from drumheat.thermal.integrate import (ThermalStabilityError, advance_adaptive,
                                         advance_explicit, check_explicit_step, initial_state)
 from drumheat.thermal.network import ContactNetwork, find_contacts_2d_drum
-from drumheat.trajectory import Trajectory
+from drumheat.motion.trajectory import Trajectory
 
 
 def _concrete(x):
@@ -126,7 +126,7 @@ class StaticBed:
     ----------
     autodiff : {"reverse", "forward"}
         How :meth:`solve` may be differentiated: ``"reverse"`` (default, ``jax.grad``) or
-        ``"forward"`` (``jax.jacfwd``; set by :mod:`drumheat.calibrate`).
+        ``"forward"`` (``jax.jacfwd``; set by :mod:`drumheat.analysis.calibrate`).
     t_out : ndarray
         Output times of :meth:`solve`, s (from the scene; may be replaced by any increasing
         grid starting at 0).
@@ -164,7 +164,7 @@ class StaticBed:
         """
         model, T0 = self.model(params)
         if self.mesh is not None:
-            from drumheat.sharding import shard_particles
+            from drumheat.runner.sharding import shard_particles
 
             model, T0 = shard_particles((model, T0), self.mesh, self.scene.n_particles)
         states = integrate_network(self.scene, model, self.net, initial_state(model, T0),

@@ -80,80 +80,24 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.bed import group_index, group_property, make_particles, output_times, scene_values
+from drumheat.assemble import group_index, group_property, make_particles, output_times, scene_values
 from drumheat.geometry.walls import Plane
 from drumheat.materials import gas as gas_lib
 from drumheat.mechanics import make_dem
 from drumheat.mechanics import make_particles as mechanical_particles
-from drumheat.mixing.dem import scene_contact_params
+from drumheat.motion.dem import scene_contact_params
 from drumheat.models import drag as drag_model
 from drumheat.models import moving_bed
-from drumheat.progress import SimProgress
+from drumheat.runner.progress import SimProgress
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.convection import (_air_clipped, nusselt_alpha,
                                          series_with_transient_sphere)
-from drumheat.trajectory import Trajectory
+from drumheat.motion.trajectory import Trajectory
 
 #: Gas volume per metre of apparatus of the channel part, V_KAM2 (kraychev digest section 2).
 V_KAM2 = 0.360
 #: Candidate release points per release.
 N_CANDIDATES = 16
-
-_MISSING = "a table"
-
-
-def check_scene(s: Scene) -> None:
-    """Cross-field rules of motion model 'pneumatic' (called by the scene validation)."""
-    from drumheat.scene import check_apparatus_tables
-
-    n = s.name
-    check_apparatus_tables(s, "channel", "height, gap, depth, length, gas_velocity, "
-                           "solids_mass_flow", "of the channel")
-    if s.gas is None:
-        raise SceneError("gas.temperature", None, "motion model 'pneumatic' needs the gas inlet "
-                         "temperature [gas] temperature, in K", n)
-    for eff in ("contact", "wall", "loss", "radiation", "internal"):
-        if getattr(s.heat, eff) is not None:
-            raise SceneError(f"heat.{eff}", _MISSING, "motion model 'pneumatic' exchanges heat "
-                             "with the gas only ([heat.convection]); remove this table", n)
-    c = s.heat.convection
-    if c is not None:
-        if c.correlation == "fluidized-bed":
-            raise SceneError("heat.convection.correlation", c.correlation, "the channel uses a "
-                             "single-sphere correlation at each particle's slip speed, e.g. "
-                             "'gnielinski-kraychev'", n)
-        if c.velocity is not None:
-            raise SceneError("heat.convection.velocity", c.velocity, "motion model 'pneumatic' "
-                             "computes each particle's slip velocity; leave velocity out", n)
-        if c.porosity is not None:
-            raise SceneError("heat.convection.porosity", c.porosity, "not used by motion model "
-                             "'pneumatic' (single spheres in a dilute flow); leave it out", n)
-    if c is not None and c.properties == "gas" and s.gas.kinematic_viscosity is None:
-        raise SceneError("gas.kinematic_viscosity", None, "properties = 'gas' takes the drag's "
-                         "viscosity from [gas]: give kinematic_viscosity, in m2/s", n)
-    for key in ("record_interval", "replay_after"):
-        if getattr(s.dem, key) is not None:
-            raise SceneError(f"dem.{key}", getattr(s.dem, key), "not supported by motion model "
-                             "'pneumatic'; leave it out", n)
-    if s.dem.thermal_substeps != 1 or s.dem.settle_time != 0:
-        key = "thermal_substeps" if s.dem.thermal_substeps != 1 else "settle_time"
-        raise SceneError(f"dem.{key}", getattr(s.dem, key), "motion model 'pneumatic' takes a "
-                         "heat step every mechanical step and starts with an empty channel; "
-                         "leave it out", n)
-    ch = s.channel
-    d_max = max(g.diameter for g in s.groups)
-    if ch.gap <= d_max:
-        raise SceneError("channel.gap", ch.gap, f"must exceed the largest particle diameter "
-                         f"{d_max:g} m", n)
-    if ch.height <= 4 * d_max:
-        raise SceneError("channel.height", ch.height, "must be at least 4 particle diameters", n)
-    if ch.depth > ch.length * (1 + 1e-12):
-        raise SceneError("channel.depth", ch.depth, f"the simulated slice cannot be longer "
-                         f"than the channel, channel.length = {ch.length:g} m", n)
-    if ch.steady_after is not None and ch.steady_after >= s.run.duration:
-        raise SceneError("channel.steady_after", ch.steady_after, "must be shorter than "
-                         f"run.duration = {s.run.duration:g} s", n)
-
 
 # ---------------------------------------------------------------------------------------------
 # pure pieces
@@ -279,7 +223,6 @@ class PneumaticChannel:
     autodiff = None
 
     def __init__(self, scene: Scene):
-        check_scene(scene)
         self.scene = scene
         ch, cfg = scene.channel, scene.dem
         value = scene_values(scene)

@@ -3,7 +3,7 @@
 Made from a result folder (``particles.npz`` and ``scene.toml``, as ``drumheat run`` writes
 them), one frame per output time::
 
-    from drumheat.animate import animate
+    from drumheat.results.animate import animate
     animate("results/weigler-static")                      # -> results/weigler-static/animation.gif
     animate("results/weigler-static", "eq.mp4", fps=20)    # MP4 needs imageio-ffmpeg
 
@@ -58,7 +58,7 @@ def _format(out, fmt) -> str:
 
 def _register(result_dir, path: Path) -> None:
     """Record ``path`` in the result folder's manifest when it lies directly inside it."""
-    from drumheat.io import register_outputs
+    from drumheat.results.files import register_outputs
 
     if Path(path).resolve().parent == Path(result_dir).resolve():
         register_outputs(result_dir, [Path(path).name])
@@ -95,7 +95,7 @@ def animate(result_dir, out=None, fps: float = 10, fmt: str | None = None, dpi: 
 
     Raises
     ------
-    drumheat.plot.ResultFolderError
+    drumheat.results.plot.ResultFolderError
         Missing folder, ``particles.npz`` or arrays (a :class:`FileNotFoundError`).
     AnimationError
         Unknown format, or MP4 requested without ffmpeg.
@@ -106,7 +106,7 @@ def animate(result_dir, out=None, fps: float = 10, fmt: str | None = None, dpi: 
     import matplotlib.pyplot as plt
     from matplotlib import animation
 
-    from drumheat import plot
+    from drumheat.results import plot
 
     frames = plot.read_particles(result_dir)
     fmt = _format(out, fmt)

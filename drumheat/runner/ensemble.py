@@ -28,7 +28,7 @@ How the variants run depends on the motion model:
   overridden keys that vary.
 * ``dem``: **vmapped**. The DEM state (positions, velocities, springs, jax-md neighbour list,
   temperatures, and the thermal model's array leaves, which :func:`make_thermal_update
-  <drumheat.mixing.dem.make_thermal_update>` reads from the state) gets a variant axis and
+  <drumheat.motion.dem.make_thermal_update>` reads from the state) gets a variant axis and
   every output interval runs as one ``vmap`` of the chunked step loop. Variants may differ in
   packing (``run.seed``), initial temperatures and thermal parameters; the mechanics (contact
   parameters, particle sizes, drum, time step) are compile-time constants of the step and
@@ -44,7 +44,7 @@ How the variants run depends on the motion model:
   networks of different sizes, phase schedules) is not batched yet.
 
 With ``devices=`` the variant axis is split over several devices
-(:mod:`drumheat.sharding`): the variant count is padded to a multiple of the device count and
+(:mod:`drumheat.runner.sharding`): the variant count is padded to a multiple of the device count and
 the padding dropped afterwards; the results are those of one device to round-off.
 """
 
@@ -149,7 +149,7 @@ class EnsembleResult:
         Sets :attr:`sequential_wall_time_s`. Each ``drumheat.run`` call is timed as a user
         would see it (including compilation where the jit cache cannot be reused).
         """
-        from drumheat.runner import run
+        from drumheat.runner.loop import run
 
         start = time.perf_counter()
         for r in self.results:
@@ -252,7 +252,7 @@ def run_ensemble(scene: Scene | str, overrides, *, devices=None, progress: bool 
         (see :func:`expand_overrides`): a list of dicts, a dict of key -> list of values (a
         grid sweep; scalar values apply to all variants) or a number of identical copies.
     devices : None, "all", int or list of jax.Device, optional
-        Split the variant axis over these devices (:mod:`drumheat.sharding`). Default: one
+        Split the variant axis over these devices (:mod:`drumheat.runner.sharding`). Default: one
         device.
     progress : bool
         Show a progress bar over the simulated time (vmapped) or per run (one by one).
@@ -280,10 +280,10 @@ def run_ensemble(scene: Scene | str, overrides, *, devices=None, progress: bool 
     may vary and why the others are not); ``docs/scaling.md`` has the measured speed-ups.
     DEM trajectories are chaotic, so a vmapped DEM variant agrees with its single run to
     round-off only over the first steps, statistically afterwards. The batched programs are
-    kept in JAX's persistent compilation cache (:mod:`drumheat.compile_cache`): a second
+    kept in JAX's persistent compilation cache (:mod:`drumheat.runner.compile_cache`): a second
     ensemble of the same structure does not compile again.
     """
-    from drumheat.compile_cache import enable_compilation_cache
+    from drumheat.runner.compile_cache import enable_compilation_cache
 
     enable_compilation_cache()
     variants = expand_overrides(overrides)
@@ -304,7 +304,7 @@ def run_ensemble(scene: Scene | str, overrides, *, devices=None, progress: bool 
         if any(v != vals[0] for v in vals):
             _refuse(what, f"{vals[0]!r} vs {next(v for v in vals if v != vals[0])!r}", variants,
                     name)
-    from drumheat.sharding import resolve_devices
+    from drumheat.runner.sharding import resolve_devices
 
     devs = resolve_devices(devices)
     model = scenes[0].motion.model
@@ -320,7 +320,7 @@ def run_ensemble(scene: Scene | str, overrides, *, devices=None, progress: bool 
     else:
         warnings.warn(f"motion model {model!r}: {reason}; the {len(scenes)} variants run one "
                       "after the other", EnsembleWarning, stacklevel=2)
-        from drumheat.runner import run
+        from drumheat.runner.loop import run
 
         results = [run(s, progress=progress) for s in scenes]
         vmapped = False
@@ -397,7 +397,7 @@ def _stack(trees, what: str, variants, scene_name):
 def _place(tree, flat_axes, n_var: int, mesh):
     """Pad the batched leaves of ``tree`` to a multiple of the device count and split them
     over ``mesh``; replicate the unbatched ones."""
-    from drumheat.sharding import pad_to_multiple, replicate, shard_batch
+    from drumheat.runner.sharding import pad_to_multiple, replicate, shard_batch
 
     leaves, tdef = jax.tree_util.tree_flatten(tree)
     k = mesh.devices.size
@@ -502,8 +502,8 @@ def _static_beds(scenes):
     """A StaticBed per scene; variants with the same packing share its construction."""
     import copy
 
-    from drumheat.bed import output_times
-    from drumheat.mixing.static import StaticBed
+    from drumheat.assemble import output_times
+    from drumheat.motion.static import StaticBed
 
     built: dict = {}
     beds = []
@@ -521,9 +521,9 @@ def _static_beds(scenes):
 
 
 def _run_static(scenes: list[Scene], variants, devs, progress):
-    from drumheat.mixing.static import StaticBed, stack_states
-    from drumheat.progress import SimProgress
-    from drumheat.runner import make_result
+    from drumheat.motion.static import StaticBed, stack_states
+    from drumheat.runner.progress import SimProgress
+    from drumheat.runner.loop import make_result
     from drumheat.thermal.integrate import explicit_steps, initial_state
 
     name = scenes[0].name
@@ -554,7 +554,7 @@ def _run_static(scenes: list[Scene], variants, devs, progress):
                                 *[initial_state(m, T0) for m, T0 in built])
     n_var = len(scenes)
     if devs is not None and len(devs) > 1:
-        from drumheat.sharding import make_mesh, pad_to_multiple, shard_batch
+        from drumheat.runner.sharding import make_mesh, pad_to_multiple, shard_batch
 
         mesh = make_mesh(devs)
         model_b = _place(model_b, model_flat, n_var, mesh)
@@ -574,7 +574,7 @@ def _run_static(scenes: list[Scene], variants, devs, progress):
                 y = step(model_b, net_b, y, jnp.asarray(h, float), n)
             states.append(y)
             bar.update_to(float(tb))
-    from drumheat.sharding import to_host
+    from drumheat.runner.sharding import to_host
 
     states = to_host(states)
     wall = time.perf_counter() - t0_wall
@@ -647,10 +647,10 @@ def _common_neighbors(dem, states, cap: int, cell_cap: int, realloc: bool):
 
 def _run_dem(scenes: list[Scene], variants, devs, progress):
     from drumheat.mechanics import DEMError
-    from drumheat.mixing.dem import DEMBed, _reset_record, initial_extra
-    from drumheat.progress import SimProgress
-    from drumheat.runner import make_result
-    from drumheat.sharding import to_host
+    from drumheat.motion.dem import DEMBed, _reset_record, initial_extra
+    from drumheat.runner.progress import SimProgress
+    from drumheat.runner.loop import make_result
+    from drumheat.runner.sharding import to_host
 
     name = scenes[0].name
     t0_wall = time.perf_counter()
@@ -694,14 +694,14 @@ def _run_dem(scenes: list[Scene], variants, devs, progress):
     n_var = len(scenes)
     mesh = None
     if devs is not None and len(devs) > 1:
-        from drumheat.sharding import make_mesh
+        from drumheat.runner.sharding import make_mesh
 
         mesh = make_mesh(devs)
 
     def stack(sts):
         batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *sts)
         if mesh is not None:
-            from drumheat.sharding import pad_to_multiple, shard_batch
+            from drumheat.runner.sharding import pad_to_multiple, shard_batch
 
             batch = shard_batch(pad_to_multiple(batch, n_var, len(devs))[0], mesh)
         return batch

@@ -28,12 +28,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.bed import group_index, output_times
-from drumheat.mixing.static import StaticBed
-from drumheat.progress import SimProgress
+from drumheat.assemble import group_index, output_times
+from drumheat.motion.static import StaticBed
+from drumheat.runner.progress import SimProgress
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.network import ContactNetwork
-from drumheat.trajectory import Trajectory
+from drumheat.motion.trajectory import Trajectory
 
 
 def _pad_csr(ptr, cols, fill, dtype):
@@ -73,7 +73,7 @@ class Recording:
     first : int
         First recorded interval to keep (the cycle is intervals ``first .. K-1``).
     rec : dict
-        The arrays of ``contacts.npz`` (see :class:`drumheat.mixing.dem.DEMBed`): ``interval``,
+        The arrays of ``contacts.npz`` (see :class:`drumheat.motion.dem.DEMBed`): ``interval``,
         ``n_particles``, ``pair_ptr/pair_i/pair_j/pair_duration``, ``wall_ptr/wall_particle/
         wall_index/wall_duration``, ``wall_heated``, ``positions`` (K + 1, N, dim), ``group``.
     """

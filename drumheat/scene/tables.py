@@ -1,17 +1,21 @@
-"""Scene description: immutable dataclasses, TOML load/save, validation with clear errors.
+"""The tables of a scene file, one frozen dataclass each, and the :class:`Scene` that holds them.
 
 A scene file (TOML, SI units, temperatures in kelvin) has the tables of ``DESIGN.md``
 (``[run]``, ``[drum]``, ``[[groups]]``, ``[gas]``, ``[heat.*]``, ``[motion]``) and
 ``[packing]``. Every key is declared once below as a dataclass field with its unit, default,
-constraint and documentation; the loader and the scene-file reference are generated from these
-declarations. To add an effect, declare its table as a dataclass and add one field to
-:class:`HeatConfig`.
+constraint and documentation (:func:`~drumheat.scene.spec.spec`); the loader and the scene-file
+reference are generated from these declarations. To add an effect, declare its table as a
+dataclass and add one field to :class:`HeatConfig`.
 
-Every bad value is rejected before any computation by :class:`SceneError`, whose message names
-the dotted key, the value and what is allowed.
+Every table checks itself when it is built (:class:`~drumheat.scene.spec.Table`) and a
+:class:`Scene` checks the rules between its tables (:mod:`drumheat.scene.rules`), so every bad
+value is rejected before any computation by :class:`~drumheat.scene.spec.SceneError`, whose
+message names the dotted key, the value and what is allowed; a scene built in Python is
+checked exactly as one read from a file.
 
 Examples
 --------
+>>> from drumheat.scene import load_scene
 >>> scene = load_scene("weigler-static", overrides={"run.duration": 600.0})
 >>> scene.groups[0].temperature
 299.15
@@ -20,72 +24,21 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import importlib.resources
-import math
-import re
-import tomllib
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
 from drumheat.materials import GASES, MATERIALS
-
-_REQUIRED = dataclasses.MISSING
-
-
-class SceneError(ValueError):
-    """A scene value is missing, unknown or not allowed.
-
-    Attributes
-    ----------
-    key : str
-        Dotted path of the offending key, e.g. ``groups.0.diameter``.
-    value : Any
-        The value given (``None`` if missing).
-    allowed : str
-        What would be accepted.
-    """
-
-    def __init__(self, key: str, value: Any, allowed: str, scene: str | None = None):
-        self.key, self.value, self.allowed, self.scene = key, value, allowed, scene
-        where = f"scene {scene!r}: " if scene else ""
-        if value is _MISSING_VALUE:
-            msg = f"{where}required key '{key}' is missing; {allowed}."
-        else:
-            msg = f"{where}key '{key}' = {value!r} is not allowed; {allowed}."
-        super().__init__(msg)
-
-
-_MISSING_VALUE = object()
-
-
-def spec(default: Any = _REQUIRED, *, unit: str = "", doc: str = "", gt: float | None = None,
-         ge: float | None = None, lt: float | None = None, le: float | None = None,
-         choices: tuple | None = None, default_factory: Any = _REQUIRED,
-         required_when: Any = None, kw_only: bool = False):
-    """Declare a scene key: a dataclass field with unit, documentation and constraints.
-
-    ``required_when(table) -> bool`` makes an optional key required depending on the raw table
-    it sits in (e.g. ``[drum]`` for the motion models that need a drum); ``kw_only`` lets such a
-    key keep its place in the declaration order (the order in which missing keys are reported).
-    """
-    meta = dict(unit=unit, doc=doc, gt=gt, ge=ge, lt=lt, le=le, choices=choices,
-                required_when=required_when)
-    if default_factory is not _REQUIRED:
-        return field(default_factory=default_factory, metadata=meta, kw_only=kw_only)
-    return field(default=default, metadata=meta, kw_only=kw_only)
-
-
-# ---------------------------------------------------------------------------------------------
-# Tables
-# ---------------------------------------------------------------------------------------------
-
+from drumheat.scene.rules import DRUM_MOTION_MODELS, MOTION_MODEL_NAMES, check_scene
+from drumheat.scene.rules import motion_name as _motion_name
+from drumheat.scene.spec import (Table, build_table, building, iter_table_keys, set_path, spec,
+                                 to_dict)
 
 @dataclass(frozen=True)
-class RunConfig:
+class RunConfig(Table):
     """``[run]``: duration, output and the thermal integrator."""
+
+    TABLE = "run"
 
     duration: float = spec(unit="s", gt=0, doc="Simulated process time.")
     output_interval: float = spec(unit="s", gt=0, doc="Time between recorded outputs.")
@@ -102,8 +55,10 @@ class RunConfig:
 
 
 @dataclass(frozen=True)
-class DrumConfig:
+class DrumConfig(Table):
     """``[drum]``: the drum shell (axis through the origin, along z in 3D)."""
+
+    TABLE = "drum"
 
     diameter: float = spec(unit="m", gt=0, doc="Inner drum diameter.")
     rpm: float = spec(0.0, unit="1/min", doc="Rotation speed, positive counter-clockwise "
@@ -162,8 +117,10 @@ class DrumConfig:
 
 
 @dataclass(frozen=True)
-class GroupConfig:
+class GroupConfig(Table):
     """``[[groups]]``: one table per particle group (fraction)."""
+
+    TABLE = "groups.*"
 
     name: str = spec(doc="Group name; time series column T_mean:<name>.")
     count: int = spec(ge=1, doc="Number of particles.")
@@ -182,8 +139,10 @@ class GroupConfig:
 
 
 @dataclass(frozen=True)
-class GasConfig:
+class GasConfig(Table):
     """``[gas]``: the gas surrounding the particles."""
+
+    TABLE = "gas"
 
     temperature: float = spec(unit="K", gt=0, doc="Gas (chamber air) temperature.")
     pressure: float = spec(101325.0, unit="Pa", gt=0, doc="Gas pressure.")
@@ -207,8 +166,10 @@ class GasConfig:
 
 
 @dataclass(frozen=True)
-class ContactConfig:
+class ContactConfig(Table):
     """``[heat.contact]``: particle-particle contact conduction (weigler eq. [2.7])."""
+
+    TABLE = "heat.contact"
 
     model: str = spec("constant", choices=("constant", "schluender"),
                       doc="'constant': alpha as given; 'schluender': alpha_pp from the gas and "
@@ -219,8 +180,10 @@ class ContactConfig:
 
 
 @dataclass(frozen=True)
-class WallConfig:
+class WallConfig(Table):
     """``[heat.wall]``: particle-wall contact conduction (weigler eq. [2.7])."""
+
+    TABLE = "heat.wall"
 
     model: str = spec("constant", choices=("constant", "schluender"),
                       doc="'constant': alpha as given; 'schluender': alpha_wp from the gas and "
@@ -231,8 +194,10 @@ class WallConfig:
 
 
 @dataclass(frozen=True)
-class LossConfig:
+class LossConfig(Table):
     """``[heat.loss]``: lumped heat loss to the gas (weigler eq. [2.7], section 7.5)."""
+
+    TABLE = "heat.loss"
 
     alphaA: float = spec(unit="W/K", ge=0, doc="(alpha A)_WK per particle.")
 
@@ -242,12 +207,14 @@ CONVECTION_CORRELATIONS = ("constant", "gnielinski", "gnielinski-staltner", "ran
 
 
 @dataclass(frozen=True)
-class ConvectionConfig:
+class ConvectionConfig(Table):
     """``[heat.convection]``: particle-gas convection on the whole sphere surface pi d^2.
 
     alpha from a correlation of drumheat.models.convection (staltner-slag-particle.md section
     5, fluidized-bed-exercise.md sections 2-5, kraychev-tube-bundle.md section 4).
     """
+
+    TABLE = "heat.convection"
 
     correlation: str = spec("gnielinski", choices=CONVECTION_CORRELATIONS,
                             doc="'constant': alpha as given; 'gnielinski': single sphere, L = d, "
@@ -295,8 +262,10 @@ class ConvectionConfig:
 
 
 @dataclass(frozen=True)
-class RadiationSurface:
+class RadiationSurface(Table):
     """``[[heat.radiation.surfaces]]``: one grey surface of the enclosure."""
+
+    TABLE = "heat.radiation.surfaces.*"
 
     name: str = spec(doc="Surface name; for enclosure 'granulator' the four zones in order "
                          "'bed', 'slots', 'wall', 'outlet' (staltner-slag-particle.md section 1).")
@@ -305,11 +274,13 @@ class RadiationSurface:
 
 
 @dataclass(frozen=True)
-class RadiationConfig:
+class RadiationConfig(Table):
     """``[heat.radiation]``: grey radiation between each particle and an enclosure.
 
     q = eps_p sigma (T_s^4 - T_rad^4) on pi d^2 (staltner-slag-particle.md sections 4, 6).
     """
+
+    TABLE = "heat.radiation"
 
     enclosure: str = spec("sink", choices=("sink", "granulator"),
                           doc="'sink': the particle sees one black surface at "
@@ -327,12 +298,14 @@ class RadiationConfig:
 
 
 @dataclass(frozen=True)
-class InternalConfig:
+class InternalConfig(Table):
     """``[heat.internal]``: radial shell conduction inside every particle.
 
     Each particle carries n shells (drumheat.thermal.shells, staltner-slag-particle.md sections
     2-4); the surface shell receives the surface flows of the other effects.
     """
+
+    TABLE = "heat.internal"
 
     shells: int = spec(20, ge=2, le=2000, doc="Number of radial nodes n (node n on the surface).")
     scheme: str = spec("implicit", choices=("implicit", "explicit"),
@@ -368,8 +341,10 @@ class InternalConfig:
 
 
 @dataclass(frozen=True)
-class HeatConfig:
+class HeatConfig(Table):
     """``[heat]``: the heat-transfer effects; an absent table is not simulated."""
+
+    TABLE = "heat"
 
     contact: Optional[ContactConfig] = spec(None, doc="Particle-particle contact conduction.")
     wall: Optional[WallConfig] = spec(None, doc="Particle-wall contact conduction.")
@@ -384,27 +359,13 @@ class HeatConfig:
         return tuple(f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None)
 
 
-#: Motion models and the class implementing each ("module:Class", imported on use).
-MOTION_MODELS = {
-    "static": "drumheat.mixing.static:StaticBed",
-    "random": "drumheat.mixing.random:RandomBed",
-    "granulator": "drumheat.mixing.granulator:GranulatorParticle",
-    "fluidized": "drumheat.mixing.fluidized:FluidizedBed",
-    "dem": "drumheat.mixing.dem:DEMBed",
-    "replay": "drumheat.mixing.replay:ReplayBed",
-    "pneumatic": "drumheat.mixing.pneumatic:PneumaticChannel",
-    "moving_bed": "drumheat.mixing.moving_bed:MovingBed",
-}
-
-#: Motion models whose particles lie in the drum of the ``[drum]`` table.
-DRUM_MOTION_MODELS = ("static", "random", "dem", "replay")
-
-
 @dataclass(frozen=True)
-class MotionConfig:
+class MotionConfig(Table):
     """``[motion]``: how the particles move."""
 
-    model: str = spec("static", choices=tuple(MOTION_MODELS),
+    TABLE = "motion"
+
+    model: str = spec("static", choices=MOTION_MODEL_NAMES,
                       doc="'static': a resting packing, contacts found once from geometry; "
                           "'random': the semi-discrete penetration model, a resting packing "
                           "whose particle temperatures are re-mixed every t_R "
@@ -425,12 +386,14 @@ class MotionConfig:
 
 
 @dataclass(frozen=True)
-class GranulatorConfig:
+class GranulatorConfig(Table):
     """``[granulator]``: the dry slag granulator of staltner-slag-particle.md sections 1, 7, 10.
 
     Zones: bed disc (radius r2, z = 0), slotted cylinder (r2, height h3), water-cooled cone
     (height h4, inclined alpha4 to the horizontal), outlet disc (r5 = r2 - h4/tan alpha4).
     """
+
+    TABLE = "granulator"
 
     r2: float = spec(unit="m", gt=0, doc="Radius of the bed and the slotted cylinder.")
     h4: float = spec(unit="m", gt=0, doc="Height of the water-cooled cone.")
@@ -460,12 +423,14 @@ class GranulatorConfig:
 
 
 @dataclass(frozen=True)
-class DEMConfig:
+class DEMConfig(Table):
     """``[dem]``: soft-sphere mechanics of motion model 'dem' (drumheat.mechanics).
 
     Linear spring-dashpot normal force, Cundall-Strack tangential spring with Coulomb limit,
     rotation; weigler-thermal-dem.md sections 4-5 (Table 2-1, PFC settings).
     """
+
+    TABLE = "dem"
 
     stiffness: Optional[float] = spec(None, unit="N/m", gt=0,
                                       doc="Normal (= tangential) stiffness k_n of particle "
@@ -529,13 +494,15 @@ class DEMConfig:
 
 
 @dataclass(frozen=True)
-class ChannelConfig:
+class ChannelConfig(Table):
     """``[channel]``: vertical pneumatic channel of motion model 'pneumatic'.
 
     Kraychev digest (kraychev-tube-bundle.md) sections 1, 2, 6: particles carried upward by
     gas in plug flow; y up (gas and solids), x across the gap between two walls, z along the
     channel length (the simulated slice of depth ``depth`` is periodic in z).
     """
+
+    TABLE = "channel"
 
     height: float = spec(unit="m", gt=0, doc="Channel height (inlet y = 0, outlet y = height).")
     gap: float = spec(unit="m", gt=0, doc="Clear width between the two channel walls (x).")
@@ -567,7 +534,7 @@ class ChannelConfig:
 
 
 @dataclass(frozen=True)
-class HopperConfig:
+class HopperConfig(Table):
     """``[hopper]``: hopper with a staggered bundle of horizontal tubes (motion 'moving_bed').
 
     kraychev-tube-bundle.md sections 1, 2, 7: the solids sink through the bundle and leave
@@ -575,6 +542,8 @@ class HopperConfig:
     x across the bundle (hopper axis x = 0), y up (y = 0 at the slit lips), z along the tubes
     (a 3D slice of length ``depth``, periodic in z).
     """
+
+    TABLE = "hopper"
 
     slit_width: float = spec(unit="m", gt=0, doc="Outlet slit width S (4-16 mm in the source).")
     tube_temperature: float = spec(unit="K", gt=0, doc="Temperature of all tubes (t_R,OF).")
@@ -609,8 +578,10 @@ class HopperConfig:
 
 
 @dataclass(frozen=True)
-class ReplayConfig:
+class ReplayConfig(Table):
     """``[replay]``: thermal-only replay of a recorded contact network (motion 'replay')."""
+
+    TABLE = "replay"
 
     file: str = spec(doc="contacts.npz written by a 'dem' run with dem.record_interval; "
                          "relative to the scene file.")
@@ -621,8 +592,10 @@ class ReplayConfig:
 
 
 @dataclass(frozen=True)
-class PackingConfig:
+class PackingConfig(Table):
     """``[packing]``: how the initial packing is made and how contacts are found in it."""
+
+    TABLE = "packing"
 
     method: str = spec("deposition", choices=("deposition", "pour", "file"),
                        doc="'deposition': particles dropped one by one at random positions roll "
@@ -648,15 +621,16 @@ class PackingConfig:
 
 
 @dataclass(frozen=True)
-class Scene:
+class Scene(Table):
     """A complete, validated scene. Build with :func:`load_scene` or :func:`scene_from_dict`."""
+
+    TABLE = ""
 
     name: str = spec(doc="Scene name; default result folder results/<name>.")
     run: RunConfig = spec(doc="Duration, output and integrator.")
     drum: Optional[DrumConfig] = spec(
-        None, kw_only=True, doc="The drum; required for the motion models static and random.",
-        required_when=lambda t: (t.get("motion") or {}).get("model", "static")
-        in DRUM_MOTION_MODELS if isinstance(t.get("motion") or {}, dict) else True)
+        None, doc="The drum; required for the motion models " + ", ".join(DRUM_MOTION_MODELS)
+        + ".", required_when=lambda s: _motion_name(s.motion) in DRUM_MOTION_MODELS)
     groups: tuple[GroupConfig, ...] = spec(doc="Particle groups, at least one.")
     description: str = spec("", doc="One line shown by `drumheat scenes`.")
     dim: int = spec(2, choices=(2, 3), doc="2: a monolayer of spheres in a drum slice; 3: a 3D "
@@ -676,20 +650,36 @@ class Scene:
     source_path: Optional[str] = field(default=None, compare=False,
                                        metadata=dict(internal=True))
 
+    def __post_init__(self):
+        with building("", self.name if isinstance(self.name, str) else None):
+            super().__post_init__()
+
+    def check(self, prefix: str, scene_name: str | None) -> None:
+        """The cross-table rules (:mod:`drumheat.scene.rules`)."""
+        check_scene(self)
+
     # -- convenience ---------------------------------------------------------------------
     @property
     def n_particles(self) -> int:
+        """Number of particles of all groups."""
         return sum(g.count for g in self.groups)
 
     def to_dict(self) -> dict:
         """The scene as a plain dict (what a TOML file holds); unset optional keys omitted."""
-        return _to_dict(self)
+        return to_dict(self)
 
     def to_toml(self) -> str:
-        """The scene as TOML text that :func:`load_scene` reads back to an equal scene."""
+        """The scene as TOML text that :func:`~drumheat.scene.load_scene` reads back to an
+        equal scene."""
         import tomli_w
 
         return tomli_w.dumps(self.to_dict())
+
+    def save(self, path) -> Path:
+        """Write the scene as a TOML scene file; returns the path."""
+        path = Path(path)
+        path.write_text(self.to_toml())
+        return path
 
     def get(self, path: str) -> Any:
         """Value at a dotted path, e.g. ``scene.get("groups.0.temperature")``."""
@@ -698,494 +688,32 @@ class Scene:
             obj = obj[int(part)] if isinstance(obj, tuple) else getattr(obj, part)
         return obj
 
-    def with_overrides(self, overrides: dict[str, Any]) -> "Scene":
-        """A new validated scene with dotted-path overrides applied."""
+    def replace(self, overrides: dict[str, Any] | None = None, /, **changes) -> "Scene":
+        """A new, checked scene with some values changed.
+
+        Keys are dotted paths, given as a dict (``scene.replace({"heat.contact.alpha":
+        120.0, "groups.0.temperature": 300.0})``) or, for top-level keys, as keyword
+        arguments (``scene.replace(name="mine")``). A value None removes the key, e.g.
+        switches an effect table off (see :meth:`without`).
+        """
         raw = self.to_dict()
-        for key, value in overrides.items():
-            _set_path(raw, key, value, self.name)
-        return scene_from_dict(raw, source_path=self.source_path)
+        for key, value in {**(overrides or {}), **changes}.items():
+            set_path(raw, key, value, self.name)
+        return build_table(Scene, raw, "", raw.get("name") if isinstance(raw.get("name"), str)
+                           else None, source_path=self.source_path)
 
+    def with_overrides(self, overrides: dict[str, Any]) -> "Scene":
+        """A new validated scene with dotted-path overrides applied (:meth:`replace`)."""
+        return self.replace(overrides)
 
-# ---------------------------------------------------------------------------------------------
-# Generic loader
-# ---------------------------------------------------------------------------------------------
-
-
-def _unwrap_optional(tp):
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if len(args) == 1:
-            return args[0], True
-    return tp, False
-
-
-def _type_name(tp) -> str:
-    if dataclasses.is_dataclass(tp):
-        return "a table"
-    if typing.get_origin(tp) is tuple:
-        return "an array of tables"
-    return {float: "a number", int: "an integer", str: "a string", bool: "true or false"}[tp]
-
-
-def _allowed_text(meta: dict, tp) -> str:
-    parts = []
-    if meta.get("choices"):
-        parts.append("allowed: " + ", ".join(repr(c) for c in meta["choices"]))
-    else:
-        parts.append(f"must be {_type_name(tp)}")
-    for key, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
-        if meta.get(key) is not None:
-            parts.append(f"{op} {meta[key]:g}")
-    if meta.get("unit"):
-        parts.append(f"in {meta['unit']}")
-    return " ".join(parts)
-
-
-def _convert(value, tp, meta, key, scene_name):
-    tp, _ = _unwrap_optional(tp)
-    allowed = _allowed_text(meta, tp)
-    if dataclasses.is_dataclass(tp):
-        if not isinstance(value, dict):
-            raise SceneError(key, value, "must be a table", scene_name)
-        return _build(tp, value, key, scene_name)
-    if typing.get_origin(tp) is tuple:
-        (item_tp, _ellipsis) = typing.get_args(tp)
-        if not isinstance(value, list) or not value:
-            raise SceneError(key, value, "must be a non-empty array of tables", scene_name)
-        return tuple(_convert(v, item_tp, {}, f"{key}.{i}", scene_name) for i, v in enumerate(value))
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise SceneError(key, value, allowed, scene_name)
-        value = float(value)
-        if not math.isfinite(value):
-            raise SceneError(key, value, allowed + " (finite)", scene_name)
-    elif tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, float) and value.is_integer():
-                value = int(value)
-            else:
-                raise SceneError(key, value, allowed, scene_name)
-    elif tp is str:
-        if not isinstance(value, str):
-            raise SceneError(key, value, allowed, scene_name)
-    elif tp is bool:
-        if not isinstance(value, bool):
-            raise SceneError(key, value, allowed, scene_name)
-    if meta.get("choices") is not None and value not in meta["choices"]:
-        raise SceneError(key, value, allowed, scene_name)
-    for k, ok in (("gt", lambda v, b: v > b), ("ge", lambda v, b: v >= b),
-                  ("lt", lambda v, b: v < b), ("le", lambda v, b: v <= b)):
-        if meta.get(k) is not None and not ok(value, meta[k]):
-            raise SceneError(key, value, allowed, scene_name)
-    return value
-
-
-def _build(cls, table: dict, prefix: str, scene_name):
-    hints = typing.get_type_hints(cls)
-    known = {f.name: f for f in dataclasses.fields(cls) if not f.metadata.get("internal")}
-    for k in table:
-        if k not in known:
-            key = f"{prefix}.{k}" if prefix else k
-            raise SceneError(key, table[k], "unknown key; known keys here: "
-                             + ", ".join(sorted(known)), scene_name)
-    kwargs = {}
-    for name, f in known.items():
-        key = f"{prefix}.{name}" if prefix else name
-        if name in table:
-            kwargs[name] = _convert(table[name], hints[name], f.metadata, key, scene_name)
-        elif (f.default is _REQUIRED and f.default_factory is _REQUIRED) or (
-                f.metadata.get("required_when") is not None and f.metadata["required_when"](table)):
-            tp, _ = _unwrap_optional(hints[name])
-            raise SceneError(key, _MISSING_VALUE, _allowed_text(f.metadata, tp), scene_name)
-    return cls(**kwargs)
-
-
-def _to_dict(obj) -> Any:
-    if dataclasses.is_dataclass(obj):
-        out = {}
-        for f in dataclasses.fields(obj):
-            if f.metadata.get("internal"):
-                continue
-            v = getattr(obj, f.name)
-            if v is None:
-                continue
-            out[f.name] = _to_dict(v)
-        return out
-    if isinstance(obj, tuple):
-        return [_to_dict(v) for v in obj]
-    return obj
-
-
-def _set_path(raw: dict, key: str, value: Any, scene_name=None) -> None:
-    parts = key.split(".")
-    obj: Any = raw
-    for i, part in enumerate(parts[:-1]):
-        here = ".".join(parts[: i + 1])
-        if isinstance(obj, list):
-            if not part.isdigit() or int(part) >= len(obj):
-                raise SceneError(here, part, f"index must be 0..{len(obj) - 1}", scene_name)
-            obj = obj[int(part)]
-        else:
-            nxt = obj.get(part)
-            if nxt is None:
-                nxt = obj[part] = {}
-            elif not isinstance(nxt, (dict, list)):
-                raise SceneError(here, nxt, "is a value, not a table", scene_name)
-            obj = nxt
-    last = parts[-1]
-    if isinstance(obj, list):
-        if not last.isdigit() or int(last) >= len(obj):
-            raise SceneError(key, last, f"index must be 0..{len(obj) - 1}", scene_name)
-        if value is None:
-            raise SceneError(key, None, "a group cannot be removed by an override", scene_name)
-        obj[int(last)] = value
-    elif value is None:
-        obj.pop(last, None)
-    else:
-        obj[last] = value
-
-
-def parse_override(text: str) -> tuple[str, Any]:
-    """Parse ``KEY=VALUE`` (VALUE as a TOML value; bare words are strings; ``none`` removes
-    the key, e.g. ``heat.radiation=none`` switches radiation off)."""
-    if "=" not in text:
-        raise SceneError(text, text, "overrides look like KEY=VALUE, e.g. run.duration=600")
-    key, raw = text.split("=", 1)
-    key, raw = key.strip(), raw.strip()
-    if raw.lower() == "none":
-        return key, None  # removes the key: switches an effect table off
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw
-    return key, value
-
-
-#: what a scene name may look like: it names the default result folder results/<name>
-_NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")
-
-
-def _check_consistency(s: Scene) -> None:
-    n = s.name
-    if not _NAME_PATTERN.fullmatch(n) or ".." in n:
-        raise SceneError("name", n, "must be a plain file name (letters, digits and _ . + -, "
-                         "not starting with '.' or '-'): it names the result folder "
-                         "results/<name>", None)
-    if s.run.output_interval > s.run.duration:
-        raise SceneError("run.output_interval", s.run.output_interval,
-                         f"must be <= run.duration = {s.run.duration:g} s", n)
-    names = [g.name for g in s.groups]
-    for i, g in enumerate(s.groups):
-        if names.index(g.name) != i:
-            raise SceneError(f"groups.{i}.name", g.name, "group names must be unique", n)
-        if s.drum is not None and g.diameter >= s.drum.diameter:
-            raise SceneError(f"groups.{i}.diameter", g.diameter,
-                             f"must be smaller than drum.diameter = {s.drum.diameter:g} m", n)
-    if s.drum is not None and s.dim == 3 and s.drum.depth is None:
-        raise SceneError("drum.depth", _MISSING_VALUE, "a 3D scene (dim = 3) needs the axial "
-                         "length of the drum slice, in m", n)
-    if s.drum is not None and s.dim == 2:
-        solid = sum(g.count * math.pi * g.diameter**2 / 4 for g in s.groups)
-        drum = math.pi * s.drum.diameter**2 / 4
-        if solid > 0.8 * drum:
-            raise SceneError("groups", f"{s.n_particles} particles",
-                             f"the particles cover {solid / drum:.0%} of the drum cross-section; "
-                             "a monolayer packing holds at most about 80 %", n)
-    if (s.heat.wall is not None and s.motion.model != "moving_bed"  # tubes: [hopper]
-            and (s.drum is None or not s.drum.heated_surfaces())):
-        raise SceneError("drum.wall_temperature", _MISSING_VALUE,
-                         "[heat.wall] needs the wall temperature, in K", n)
-    if s.drum is not None and s.drum.has_internals:
-        d = s.drum
-        if s.motion.model != "dem":
-            raise SceneError("drum.sections" if d.sections else "drum.inner_diameter",
-                             d.sections or d.inner_diameter, "drum internals (radial plates, "
-                             "inner cylinder) need motion model 'dem'", n)
-        if d.inner_diameter and d.inner_diameter >= d.diameter:
-            raise SceneError("drum.inner_diameter", d.inner_diameter,
-                             f"must be smaller than drum.diameter = {d.diameter:g} m", n)
-        if d.sections and s.packing.method == "deposition":
-            raise SceneError("packing.method", "deposition", "the geometric deposition does not "
-                             "know the radial plates; use 'pour' (fills every section equally) "
-                             "or 'file'", n)
-        for key, present in (("plate_temperature", bool(d.sections)),
-                             ("inner_temperature", bool(d.inner_diameter))):
-            if getattr(d, key) is not None and not present:
-                raise SceneError(f"drum.{key}", getattr(d, key), "there is no such surface "
-                                 "(drum.sections / drum.inner_diameter is 0 or left out)", n)
-    for eff in ("contact", "wall"):
-        cfg = getattr(s.heat, eff)
-        if cfg is not None and cfg.model == "constant" and cfg.alpha is None:
-            raise SceneError(f"heat.{eff}.alpha", _MISSING_VALUE,
-                             "model 'constant' needs alpha, a number > 0 in W/(m2 K)", n)
-        if cfg is not None and cfg.model == "schluender" and cfg.alpha is not None:
-            raise SceneError(f"heat.{eff}.alpha", cfg.alpha,
-                             "model 'schluender' computes alpha; leave alpha out or use "
-                             "model 'constant'", n)
-    if s.heat.loss is not None and s.gas is None:
-        raise SceneError("gas.temperature", _MISSING_VALUE,
-                         "[heat.loss] needs the gas temperature, in K", n)
-    _check_new_effects(s)
-    if s.motion.model == "dem" and s.dem is None:
-        raise SceneError("dem", _MISSING_VALUE, "motion model 'dem' needs the [dem] table "
-                         "(its keys all have defaults: [dem] alone is enough)", n)
-    if s.motion.model == "replay" and s.replay is None:
-        raise SceneError("replay.file", _MISSING_VALUE, "motion model 'replay' needs "
-                         "[replay] file = a contacts.npz recorded by a 'dem' run", n)
-    if s.dem is not None and s.dem.restitution is not None and s.dem.damping_ratio not in (
-            None, 0.3):
-        raise SceneError("dem.restitution", s.dem.restitution, "give either dem.restitution or "
-                         "dem.damping_ratio, not both", n)
-    if s.dem is not None and s.dem.replay_after is not None:
-        if s.dem.record_interval is None:
-            raise SceneError("dem.replay_after", s.dem.replay_after, "needs dem.record_interval "
-                             "(the contacts to replay)", n)
-        cyc = s.dem.replay_cycle if s.dem.replay_cycle is not None else 0.5 * s.dem.replay_after
-        kc = cyc / s.dem.record_interval
-        if cyc > s.dem.replay_after * (1 + 1e-9) or abs(kc - round(kc)) > 1e-6 or round(kc) < 1:
-            raise SceneError("dem.replay_cycle", cyc, "must be a whole number of "
-                             f"dem.record_interval = {s.dem.record_interval:g} s and at most "
-                             f"dem.replay_after = {s.dem.replay_after:g} s", n)
-        k = s.dem.replay_after / s.run.output_interval
-        if abs(k - round(k)) > 1e-6 or round(k) < 1:
-            raise SceneError("dem.replay_after", s.dem.replay_after, "must be a positive "
-                             f"multiple of run.output_interval = {s.run.output_interval:g} s", n)
-    if s.packing.method == "pour" and s.dem is None:
-        raise SceneError("packing.method", "pour", "pouring runs the DEM; add the [dem] table", n)
-    if s.motion.model == "random" and s.motion.t_R is None:
-        raise SceneError("motion.t_R", _MISSING_VALUE, "model 'random' needs the re-mixing "
-                         "period t_R, a number > 0 in s", n)
-    if s.motion.model == "fluidized":
-        if s.motion.loading is None:
-            raise SceneError("motion.loading", _MISSING_VALUE, "model 'fluidized' needs the "
-                             "particle mass per bed cross-section, in kg/m2", n)
-        if s.gas is None or s.gas.mass_flux is None:
-            raise SceneError("gas.mass_flux", _MISSING_VALUE, "model 'fluidized' needs the gas "
-                             "mass flux through the bed, in kg/(m2 s)", n)
-        if s.heat.convection is None:
-            raise SceneError("heat.convection", _MISSING_VALUE, "model 'fluidized' exchanges "
-                             "heat with the gas through [heat.convection]", n)
-        if s.motion.layers > 1 and s.motion.t_R is None:
-            raise SceneError("motion.t_R", _MISSING_VALUE, "model 'fluidized' with several "
-                             "layers needs the re-mixing period t_R, in s", n)
-    if s.motion.model == "granulator":
-        if s.granulator is None:
-            raise SceneError("granulator", _MISSING_VALUE, "motion model 'granulator' needs the "
-                             "[granulator] table (geometry, disc, slag rate)", n)
-        if s.heat.internal is None:
-            raise SceneError("heat.internal", _MISSING_VALUE, "motion model 'granulator' "
-                             "resolves the droplet's radial profile; add [heat.internal]", n)
-        if s.heat.contact is not None or s.heat.wall is not None:
-            raise SceneError("heat.contact" if s.heat.contact else "heat.wall", "a table",
-                             "a single droplet has no contacts; Phase-2 wall contact is part of "
-                             "motion model 'granulator'", n)
-        if s.n_particles != 1:
-            raise SceneError("groups", f"{s.n_particles} particles", "motion model 'granulator' "
-                             "follows one droplet (one group with count = 1); run one scene per "
-                             "size class", n)
-        g = s.granulator
-        if g.disc_height is not None and not g.h3 <= g.disc_height < g.h3 + g.h4:
-            raise SceneError("granulator.disc_height", g.disc_height, "the horizontal Phase-1 "
-                             f"path must hit the water-cooled cone: h3 <= disc_height < h3 + h4 "
-                             f"= {g.h3 + g.h4:g} m", n)
-        if g.h4 / math.tan(math.radians(g.alpha4)) >= g.r2:
-            raise SceneError("granulator.h4", g.h4, "the cone closes before its top "
-                             "(r5 = r2 - h4/tan(alpha4) <= 0); reduce h4 or raise alpha4", n)
-    if s.motion.model == "pneumatic":
-        from drumheat.mixing.pneumatic import check_scene
-
-        check_scene(s)
-    if s.motion.model == "moving_bed":
-        _check_hopper(s)
-    if s.packing.method == "file" and s.packing.file is None:
-        raise SceneError("packing.file", _MISSING_VALUE, "method 'file' needs a path to an .npz "
-                         "packing", n)
-    if (s.motion.model in DRUM_MOTION_MODELS and s.dim == 3
-            and s.packing.method == "deposition"):
-        raise SceneError("packing.method", "deposition", "the geometric deposition packing is "
-                         "2D; a 3D bed needs packing.method = 'pour' (with [dem]) or 'file'", n)
-
-
-def check_apparatus_tables(s: Scene, table: str, keys: str, what: str) -> None:
-    """Common rules of the DEM apparatus models (``moving_bed``, ``pneumatic``): their own
-    table ``[table]`` (required ``keys`` named in the message) and ``[dem]`` must be present,
-    and the scene is a 3D slice (``what`` says of what)."""
-    n, model = s.name, s.motion.model
-    if getattr(s, table) is None:
-        raise SceneError(table, _MISSING_VALUE, f"motion model '{model}' needs the [{table}] "
-                         f"table ({keys})", n)
-    if s.dem is None:
-        raise SceneError("dem", _MISSING_VALUE, f"motion model '{model}' needs the [dem] "
-                         "table (its keys all have defaults: [dem] alone is enough)", n)
-    if s.dim != 3:
-        raise SceneError("dim", s.dim, f"motion model '{model}' simulates a 3D slice {what}; "
-                         "use dim = 3", n)
-
-
-def _check_hopper(s: Scene) -> None:
-    """Cross-field rules of motion model 'moving_bed' (drumheat.mixing.moving_bed)."""
-    n = s.name
-    check_apparatus_tables(s, "hopper", "slit_width, tube_temperature, inlet_temperature, "
-                           "depth", "along the tubes")
-    h = s.hopper
-    if h.tube_diameter >= h.pitch or h.tube_diameter >= 2 * h.row_pitch:
-        raise SceneError("hopper.tube_diameter", h.tube_diameter, "the tubes must not touch: "
-                         f"less than pitch = {h.pitch:g} m", n)
-    d_max = max(g.diameter for g in s.groups)
-    if h.depth < 2.5 * d_max * 1.0001:
-        raise SceneError("hopper.depth", h.depth, "the periodic slice must be at least 2.5 "
-                         f"largest particle diameters long ({2.5 * d_max:g} m)", n)
-    if h.slit_width >= h.columns * h.pitch:
-        raise SceneError("hopper.slit_width", h.slit_width, "must be narrower than the hopper "
-                         f"(columns x pitch = {h.columns * h.pitch:g} m)", n)
-
-
-def _check_new_effects(s: Scene) -> None:
-    """Cross-field rules of [heat.convection], [heat.radiation] and [heat.internal]."""
-    n, h = s.name, s.heat
-    if h.radiation is not None:
-        for i, g in enumerate(s.groups):
-            eps = g.emissivity if g.emissivity is not None else None
-            if eps is not None and eps <= 0:
-                raise SceneError(f"groups.{i}.emissivity", eps, "[heat.radiation] needs particle "
-                                 "emissivities > 0 (leave [heat.radiation] out for none)", n)
-    c = h.convection
-    if c is not None:
-        if s.gas is None:
-            raise SceneError("gas.temperature", _MISSING_VALUE,
-                             "[heat.convection] needs the gas temperature, in K", n)
-        if c.correlation == "constant" and c.alpha is None:
-            raise SceneError("heat.convection.alpha", _MISSING_VALUE,
-                             "correlation 'constant' needs alpha, a number > 0 in W/(m2 K)", n)
-        if c.correlation != "constant" and c.alpha is not None:
-            raise SceneError("heat.convection.alpha", c.alpha, f"correlation {c.correlation!r} "
-                             "computes alpha; leave alpha out or use correlation 'constant'", n)
-        if (c.correlation not in ("constant",) and c.velocity is None
-                and s.motion.model not in ("granulator", "pneumatic")):
-            raise SceneError("heat.convection.velocity", _MISSING_VALUE,
-                             f"correlation {c.correlation!r} needs the gas velocity, in m/s", n)
-        if c.properties == "gas" and c.correlation != "constant":
-            for key in ("kinematic_viscosity", "conductivity", "heat_capacity"):
-                if getattr(s.gas, key) is None:
-                    raise SceneError(f"gas.{key}", _MISSING_VALUE, "convection with properties "
-                                     "= 'gas' needs the gas constants kinematic_viscosity, "
-                                     "conductivity and heat_capacity", n)
-        if c.internal_resistance != "none" and h.internal is not None:
-            raise SceneError("heat.convection.internal_resistance", c.internal_resistance,
-                             "with [heat.internal] the shells resolve the internal resistance; "
-                             "use 'none'", n)
-    r = h.radiation
-    if r is not None:
-        if r.enclosure == "sink" and r.sink_temperature is None:
-            raise SceneError("heat.radiation.sink_temperature", _MISSING_VALUE,
-                             "enclosure 'sink' needs the sink temperature, in K", n)
-        if r.enclosure == "granulator":
-            zones = ("bed", "slots", "wall", "outlet")
-            got = tuple(x.name for x in (r.surfaces or ()))
-            if got != zones:
-                raise SceneError("heat.radiation.surfaces", list(got), "enclosure 'granulator' "
-                                 "needs four surfaces named " + ", ".join(zones) + " in this "
-                                 "order", n)
-            if s.granulator is None:
-                raise SceneError("granulator", _MISSING_VALUE, "enclosure 'granulator' needs "
-                                 "the [granulator] geometry", n)
-    i = h.internal
-    if i is not None and (i.latent_heat is None) != (i.melting_temperature is None):
-        raise SceneError("heat.internal.melting_temperature" if i.melting_temperature is None
-                         else "heat.internal.latent_heat", _MISSING_VALUE,
-                         "latent heat needs both latent_heat (J/kg) and melting_temperature (K)", n)
-
-
-def scene_from_dict(raw: dict, source_path: str | None = None) -> Scene:
-    """Validate a plain dict (as read from TOML) and build a :class:`Scene`."""
-    name = raw.get("name") if isinstance(raw.get("name"), str) else None
-    scene = _build(Scene, raw, "", name)
-    scene = dataclasses.replace(scene, source_path=source_path)
-    _check_consistency(scene)
-    return scene
-
-
-# ---------------------------------------------------------------------------------------------
-# Built-in scenes and files
-# ---------------------------------------------------------------------------------------------
-
-
-def _scene_dir():
-    return importlib.resources.files("drumheat") / "scenes"
-
-
-def builtin_scenes() -> dict[str, str]:
-    """Built-in scenes: ``{name: description}``, sorted by name."""
-    out = {}
-    for entry in sorted(_scene_dir().iterdir(), key=lambda p: p.name):
-        if entry.name.endswith(".toml"):
-            raw = tomllib.loads(entry.read_text())
-            out[raw.get("name", entry.name[:-5])] = raw.get("description", "")
-    return out
-
-
-def read_scene_dict(name_or_path: str | Path) -> tuple[dict, str | None]:
-    """Raw dict of a built-in scene (by name) or a scene file (by path), and its path."""
-    path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists():
-        if not path.exists():
-            raise SceneError("SCENE", str(name_or_path), "no such scene file")
-        text, src = path.read_text(), str(path.resolve())
-    else:
-        entry = _scene_dir() / f"{name_or_path}.toml"
-        if not entry.is_file():
-            raise SceneError("SCENE", str(name_or_path), "not a scene file; built-in scenes: "
-                             + ", ".join(builtin_scenes()))
-        text, src = entry.read_text(), str(entry)
-    try:
-        return tomllib.loads(text), src
-    except tomllib.TOMLDecodeError as err:
-        raise SceneError("SCENE", str(name_or_path), f"not valid TOML ({err})") from None
-
-
-def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | list[str] | None = None
-               ) -> Scene:
-    """Load and validate a built-in scene (by name) or a TOML scene file (by path).
-
-    Parameters
-    ----------
-    name_or_path : str or Path
-        A built-in scene name (see ``drumheat scenes``) or a path to a ``.toml`` file.
-    overrides : dict or list of str, optional
-        Dotted-path overrides applied before validation, as a dict
-        (``{"groups.0.temperature": 300.0}``) or as ``KEY=VALUE`` strings (as ``--set``).
-
-    Raises
-    ------
-    SceneError
-        For every bad, unknown or missing value, naming the key.
-    """
-    raw, src = read_scene_dict(name_or_path)
-    if isinstance(overrides, (list, tuple)):
-        overrides = dict(parse_override(o) for o in overrides)
-    for key, value in (overrides or {}).items():
-        _set_path(raw, key, value, raw.get("name"))
-    return scene_from_dict(raw, source_path=src)
+    def without(self, *keys: str) -> "Scene":
+        """A new scene without the given tables or keys, e.g. ``scene.without(
+        "heat.radiation")`` (the effect is then not simulated)."""
+        return self.replace({k: None for k in keys})
 
 
 def iter_keys(cls=Scene, prefix: str = ""):
-    """Yield ``(dotted_key, type_name, unit, default, allowed, doc)`` for every scene key.
-
-    Used to generate the scene-file reference; ``groups.*`` stands for every group.
-    """
-    hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
-        if f.metadata.get("internal"):
-            continue
-        key = f"{prefix}{f.name}"
-        tp, optional = _unwrap_optional(hints[f.name])
-        if typing.get_origin(tp) is tuple:
-            yield from iter_keys(typing.get_args(tp)[0], f"{key}.*.")
-            continue
-        if dataclasses.is_dataclass(tp):
-            yield from iter_keys(tp, f"{key}.")
-            continue
-        default = "required" if f.default is _REQUIRED else f.default
-        yield (key, _type_name(tp), f.metadata.get("unit", ""), default,
-               _allowed_text(f.metadata, tp), f.metadata.get("doc", ""))
+    """Yield ``(dotted_key, type_name, unit, default, allowed, doc)`` for every scene key
+    (of ``cls``, default the whole :class:`Scene`); ``groups.*`` stands for every group.
+    Used to generate the scene-file reference."""
+    return iter_table_keys(cls, prefix)

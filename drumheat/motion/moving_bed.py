@@ -13,7 +13,7 @@ through a bottom slit of adjustable width S. This model simulates a slice of tha
   slit lips at ``x = +-S/2``. The bottom tube row has its tubes at ``x = +-s1/2`` (no tube right
   above the slit), the next row at ``x = 0, +-s1``, and so on.
 * **Mechanics**: the soft-sphere DEM of :mod:`drumheat.mechanics` with the ``[dem]`` table.
-* **Heat**: the coupled thermal update of :mod:`drumheat.mixing.dem` (contact conduction
+* **Heat**: the coupled thermal update of :mod:`drumheat.motion.dem` (contact conduction
   particle-particle ``[heat.contact]`` and particle-tube ``[heat.wall]``, one temperature per
   wall primitive so that the heat of every tube is booked separately).
 * **Open boundary** (``boundary_update`` hook of :func:`drumheat.mechanics.make_dem`): a
@@ -54,20 +54,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.bed import group_index, group_property, output_times, scene_values
+from drumheat.assemble import group_index, group_property, output_times, scene_values
 from drumheat.geometry.walls import FixedCylinder, Plane, Segment
 from drumheat.mechanics import DEMError, make_dem
 from drumheat.mechanics import make_particles as mechanical_particles
-from drumheat.mixing.dem import (_reset_record, initial_extra, make_thermal_update,
+from drumheat.motion.dem import (_reset_record, initial_extra, make_thermal_update,
                                  scene_contact_params)
 from drumheat.models.moving_bed import BETA_HOPPER, lmtd
-from drumheat.progress import SimProgress
+from drumheat.runner.progress import SimProgress
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.composer import ThermalModel, make_thermal_model
-from drumheat.bed import make_particles as thermal_particles
+from drumheat.assemble import make_particles as thermal_particles
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.wall import WallConduction
-from drumheat.trajectory import Trajectory
+from drumheat.motion.trajectory import Trajectory
 
 __all__ = ["HopperGeometry", "hopper_walls", "particles_to_fill", "MovingBed"]
 

@@ -2,7 +2,7 @@
 
 Pure functions on NumPy or JAX arrays. The thesis does this analysis by hand in Matlab after
 every run; here it is a library that the runner (:mod:`drumheat.run`), the calibration
-(:mod:`drumheat.calibrate`) and users in notebooks share.
+(:mod:`drumheat.analysis.calibrate`) and users in notebooks share.
 
 Two kinds of functions live here:
 

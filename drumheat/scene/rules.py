@@ -1,0 +1,319 @@
+"""The rules between the tables of a scene, and the requirements of each motion model.
+
+A table checks its own keys (:class:`~drumheat.scene.spec.Table`); what depends on several
+tables is checked here, by :func:`check_scene`, which every :class:`~drumheat.scene.Scene` runs
+when it is built. The requirements of the motion models (which tables each needs, what it
+cannot do) are scene rules too and live here, so that a scene :func:`~drumheat.load_scene`
+accepts is one :func:`~drumheat.run` accepts.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+from drumheat.scene.spec import REQUIRED, SceneError
+
+#: the motion models (drumheat.motion registers one class under each name)
+MOTION_MODEL_NAMES = ("static", "random", "granulator", "fluidized", "dem", "replay",
+                      "pneumatic", "moving_bed")
+
+#: Motion models whose particles lie in the drum of the ``[drum]`` table.
+DRUM_MOTION_MODELS = ("static", "random", "dem", "replay")
+
+
+def motion_name(motion) -> str:
+    """The motion model named by a ``[motion]`` table (a MotionConfig, a dict or None)."""
+    if motion is None:
+        return "static"
+    if isinstance(motion, dict):
+        return motion.get("model", "static")
+    return motion.model
+
+
+def check_scene(s) -> None:
+    """Every cross-table rule of scene ``s``; raises :class:`SceneError` naming the key."""
+    _check_consistency(s)
+
+
+_NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")
+
+
+def _check_consistency(s) -> None:
+    n = s.name
+    if not _NAME_PATTERN.fullmatch(n) or ".." in n:
+        raise SceneError("name", n, "must be a plain file name (letters, digits and _ . + -, "
+                         "not starting with '.' or '-'): it names the result folder "
+                         "results/<name>", None)
+    if s.run.output_interval > s.run.duration:
+        raise SceneError("run.output_interval", s.run.output_interval,
+                         f"must be <= run.duration = {s.run.duration:g} s", n)
+    names = [g.name for g in s.groups]
+    for i, g in enumerate(s.groups):
+        if names.index(g.name) != i:
+            raise SceneError(f"groups.{i}.name", g.name, "group names must be unique", n)
+        if s.drum is not None and g.diameter >= s.drum.diameter:
+            raise SceneError(f"groups.{i}.diameter", g.diameter,
+                             f"must be smaller than drum.diameter = {s.drum.diameter:g} m", n)
+    if s.drum is not None and s.dim == 3 and s.drum.depth is None:
+        raise SceneError("drum.depth", REQUIRED, "a 3D scene (dim = 3) needs the axial "
+                         "length of the drum slice, in m", n)
+    if s.drum is not None and s.dim == 2:
+        solid = sum(g.count * math.pi * g.diameter**2 / 4 for g in s.groups)
+        drum = math.pi * s.drum.diameter**2 / 4
+        if solid > 0.8 * drum:
+            raise SceneError("groups", f"{s.n_particles} particles",
+                             f"the particles cover {solid / drum:.0%} of the drum cross-section; "
+                             "a monolayer packing holds at most about 80 %", n)
+    if (s.heat.wall is not None and s.motion.model != "moving_bed"  # tubes: [hopper]
+            and (s.drum is None or not s.drum.heated_surfaces())):
+        raise SceneError("drum.wall_temperature", REQUIRED,
+                         "[heat.wall] needs the wall temperature, in K", n)
+    if s.drum is not None and s.drum.has_internals:
+        d = s.drum
+        if s.motion.model != "dem":
+            raise SceneError("drum.sections" if d.sections else "drum.inner_diameter",
+                             d.sections or d.inner_diameter, "drum internals (radial plates, "
+                             "inner cylinder) need motion model 'dem'", n)
+        if d.inner_diameter and d.inner_diameter >= d.diameter:
+            raise SceneError("drum.inner_diameter", d.inner_diameter,
+                             f"must be smaller than drum.diameter = {d.diameter:g} m", n)
+        if d.sections and s.packing.method == "deposition":
+            raise SceneError("packing.method", "deposition", "the geometric deposition does not "
+                             "know the radial plates; use 'pour' (fills every section equally) "
+                             "or 'file'", n)
+        for key, present in (("plate_temperature", bool(d.sections)),
+                             ("inner_temperature", bool(d.inner_diameter))):
+            if getattr(d, key) is not None and not present:
+                raise SceneError(f"drum.{key}", getattr(d, key), "there is no such surface "
+                                 "(drum.sections / drum.inner_diameter is 0 or left out)", n)
+    for eff in ("contact", "wall"):
+        cfg = getattr(s.heat, eff)
+        if cfg is not None and cfg.model == "constant" and cfg.alpha is None:
+            raise SceneError(f"heat.{eff}.alpha", REQUIRED,
+                             "model 'constant' needs alpha, a number > 0 in W/(m2 K)", n)
+        if cfg is not None and cfg.model == "schluender" and cfg.alpha is not None:
+            raise SceneError(f"heat.{eff}.alpha", cfg.alpha,
+                             "model 'schluender' computes alpha; leave alpha out or use "
+                             "model 'constant'", n)
+    if s.heat.loss is not None and s.gas is None:
+        raise SceneError("gas.temperature", REQUIRED,
+                         "[heat.loss] needs the gas temperature, in K", n)
+    _check_new_effects(s)
+    if s.motion.model == "dem" and s.dem is None:
+        raise SceneError("dem", REQUIRED, "motion model 'dem' needs the [dem] table "
+                         "(its keys all have defaults: [dem] alone is enough)", n)
+    if s.motion.model == "replay" and s.replay is None:
+        raise SceneError("replay.file", REQUIRED, "motion model 'replay' needs "
+                         "[replay] file = a contacts.npz recorded by a 'dem' run", n)
+    if s.dem is not None and s.dem.restitution is not None and s.dem.damping_ratio not in (
+            None, 0.3):
+        raise SceneError("dem.restitution", s.dem.restitution, "give either dem.restitution or "
+                         "dem.damping_ratio, not both", n)
+    if s.dem is not None and s.dem.replay_after is not None:
+        if s.dem.record_interval is None:
+            raise SceneError("dem.replay_after", s.dem.replay_after, "needs dem.record_interval "
+                             "(the contacts to replay)", n)
+        cyc = s.dem.replay_cycle if s.dem.replay_cycle is not None else 0.5 * s.dem.replay_after
+        kc = cyc / s.dem.record_interval
+        if cyc > s.dem.replay_after * (1 + 1e-9) or abs(kc - round(kc)) > 1e-6 or round(kc) < 1:
+            raise SceneError("dem.replay_cycle", cyc, "must be a whole number of "
+                             f"dem.record_interval = {s.dem.record_interval:g} s and at most "
+                             f"dem.replay_after = {s.dem.replay_after:g} s", n)
+        k = s.dem.replay_after / s.run.output_interval
+        if abs(k - round(k)) > 1e-6 or round(k) < 1:
+            raise SceneError("dem.replay_after", s.dem.replay_after, "must be a positive "
+                             f"multiple of run.output_interval = {s.run.output_interval:g} s", n)
+    if s.packing.method == "pour" and s.dem is None:
+        raise SceneError("packing.method", "pour", "pouring runs the DEM; add the [dem] table", n)
+    if s.motion.model == "random" and s.motion.t_R is None:
+        raise SceneError("motion.t_R", REQUIRED, "model 'random' needs the re-mixing "
+                         "period t_R, a number > 0 in s", n)
+    if s.motion.model == "fluidized":
+        if s.motion.loading is None:
+            raise SceneError("motion.loading", REQUIRED, "model 'fluidized' needs the "
+                             "particle mass per bed cross-section, in kg/m2", n)
+        if s.gas is None or s.gas.mass_flux is None:
+            raise SceneError("gas.mass_flux", REQUIRED, "model 'fluidized' needs the gas "
+                             "mass flux through the bed, in kg/(m2 s)", n)
+        if s.heat.convection is None:
+            raise SceneError("heat.convection", REQUIRED, "model 'fluidized' exchanges "
+                             "heat with the gas through [heat.convection]", n)
+        if s.motion.layers > 1 and s.motion.t_R is None:
+            raise SceneError("motion.t_R", REQUIRED, "model 'fluidized' with several "
+                             "layers needs the re-mixing period t_R, in s", n)
+    if s.motion.model == "granulator":
+        if s.granulator is None:
+            raise SceneError("granulator", REQUIRED, "motion model 'granulator' needs the "
+                             "[granulator] table (geometry, disc, slag rate)", n)
+        if s.heat.internal is None:
+            raise SceneError("heat.internal", REQUIRED, "motion model 'granulator' "
+                             "resolves the droplet's radial profile; add [heat.internal]", n)
+        if s.heat.contact is not None or s.heat.wall is not None:
+            raise SceneError("heat.contact" if s.heat.contact else "heat.wall", "a table",
+                             "a single droplet has no contacts; Phase-2 wall contact is part of "
+                             "motion model 'granulator'", n)
+        if s.n_particles != 1:
+            raise SceneError("groups", f"{s.n_particles} particles", "motion model 'granulator' "
+                             "follows one droplet (one group with count = 1); run one scene per "
+                             "size class", n)
+        g = s.granulator
+        if g.disc_height is not None and not g.h3 <= g.disc_height < g.h3 + g.h4:
+            raise SceneError("granulator.disc_height", g.disc_height, "the horizontal Phase-1 "
+                             f"path must hit the water-cooled cone: h3 <= disc_height < h3 + h4 "
+                             f"= {g.h3 + g.h4:g} m", n)
+        if g.h4 / math.tan(math.radians(g.alpha4)) >= g.r2:
+            raise SceneError("granulator.h4", g.h4, "the cone closes before its top "
+                             "(r5 = r2 - h4/tan(alpha4) <= 0); reduce h4 or raise alpha4", n)
+    if s.motion.model == "pneumatic":
+        _check_pneumatic(s)
+    if s.motion.model == "moving_bed":
+        _check_hopper(s)
+    if s.packing.method == "file" and s.packing.file is None:
+        raise SceneError("packing.file", REQUIRED, "method 'file' needs a path to an .npz "
+                         "packing", n)
+    if (s.motion.model in DRUM_MOTION_MODELS and s.dim == 3
+            and s.packing.method == "deposition"):
+        raise SceneError("packing.method", "deposition", "the geometric deposition packing is "
+                         "2D; a 3D bed needs packing.method = 'pour' (with [dem]) or 'file'", n)
+
+
+def check_apparatus_tables(s, table: str, keys: str, what: str) -> None:
+    """Common rules of the DEM apparatus models (``moving_bed``, ``pneumatic``): their own
+    table ``[table]`` (required ``keys`` named in the message) and ``[dem]`` must be present,
+    and the scene is a 3D slice (``what`` says of what)."""
+    n, model = s.name, s.motion.model
+    if getattr(s, table) is None:
+        raise SceneError(table, REQUIRED, f"motion model '{model}' needs the [{table}] "
+                         f"table ({keys})", n)
+    if s.dem is None:
+        raise SceneError("dem", REQUIRED, f"motion model '{model}' needs the [dem] "
+                         "table (its keys all have defaults: [dem] alone is enough)", n)
+    if s.dim != 3:
+        raise SceneError("dim", s.dim, f"motion model '{model}' simulates a 3D slice {what}; "
+                         "use dim = 3", n)
+
+
+def _check_hopper(s) -> None:
+    """Cross-field rules of motion model 'moving_bed' (drumheat.motion.moving_bed)."""
+    n = s.name
+    check_apparatus_tables(s, "hopper", "slit_width, tube_temperature, inlet_temperature, "
+                           "depth", "along the tubes")
+    h = s.hopper
+    if h.tube_diameter >= h.pitch or h.tube_diameter >= 2 * h.row_pitch:
+        raise SceneError("hopper.tube_diameter", h.tube_diameter, "the tubes must not touch: "
+                         f"less than pitch = {h.pitch:g} m", n)
+    d_max = max(g.diameter for g in s.groups)
+    if h.depth < 2.5 * d_max * 1.0001:
+        raise SceneError("hopper.depth", h.depth, "the periodic slice must be at least 2.5 "
+                         f"largest particle diameters long ({2.5 * d_max:g} m)", n)
+    if h.slit_width >= h.columns * h.pitch:
+        raise SceneError("hopper.slit_width", h.slit_width, "must be narrower than the hopper "
+                         f"(columns x pitch = {h.columns * h.pitch:g} m)", n)
+
+
+def _check_new_effects(s) -> None:
+    """Cross-field rules of [heat.convection], [heat.radiation] and [heat.internal]."""
+    n, h = s.name, s.heat
+    if h.radiation is not None:
+        for i, g in enumerate(s.groups):
+            eps = g.emissivity if g.emissivity is not None else None
+            if eps is not None and eps <= 0:
+                raise SceneError(f"groups.{i}.emissivity", eps, "[heat.radiation] needs particle "
+                                 "emissivities > 0 (leave [heat.radiation] out for none)", n)
+    c = h.convection
+    if c is not None:
+        if s.gas is None:
+            raise SceneError("gas.temperature", REQUIRED,
+                             "[heat.convection] needs the gas temperature, in K", n)
+        if c.correlation == "constant" and c.alpha is None:
+            raise SceneError("heat.convection.alpha", REQUIRED,
+                             "correlation 'constant' needs alpha, a number > 0 in W/(m2 K)", n)
+        if c.correlation != "constant" and c.alpha is not None:
+            raise SceneError("heat.convection.alpha", c.alpha, f"correlation {c.correlation!r} "
+                             "computes alpha; leave alpha out or use correlation 'constant'", n)
+        if (c.correlation not in ("constant",) and c.velocity is None
+                and s.motion.model not in ("granulator", "pneumatic")):
+            raise SceneError("heat.convection.velocity", REQUIRED,
+                             f"correlation {c.correlation!r} needs the gas velocity, in m/s", n)
+        if c.properties == "gas" and c.correlation != "constant":
+            for key in ("kinematic_viscosity", "conductivity", "heat_capacity"):
+                if getattr(s.gas, key) is None:
+                    raise SceneError(f"gas.{key}", REQUIRED, "convection with properties "
+                                     "= 'gas' needs the gas constants kinematic_viscosity, "
+                                     "conductivity and heat_capacity", n)
+        if c.internal_resistance != "none" and h.internal is not None:
+            raise SceneError("heat.convection.internal_resistance", c.internal_resistance,
+                             "with [heat.internal] the shells resolve the internal resistance; "
+                             "use 'none'", n)
+    r = h.radiation
+    if r is not None:
+        if r.enclosure == "sink" and r.sink_temperature is None:
+            raise SceneError("heat.radiation.sink_temperature", REQUIRED,
+                             "enclosure 'sink' needs the sink temperature, in K", n)
+        if r.enclosure == "granulator":
+            zones = ("bed", "slots", "wall", "outlet")
+            got = tuple(x.name for x in (r.surfaces or ()))
+            if got != zones:
+                raise SceneError("heat.radiation.surfaces", list(got), "enclosure 'granulator' "
+                                 "needs four surfaces named " + ", ".join(zones) + " in this "
+                                 "order", n)
+            if s.granulator is None:
+                raise SceneError("granulator", REQUIRED, "enclosure 'granulator' needs "
+                                 "the [granulator] geometry", n)
+    i = h.internal
+    if i is not None and (i.latent_heat is None) != (i.melting_temperature is None):
+        raise SceneError("heat.internal.melting_temperature" if i.melting_temperature is None
+                         else "heat.internal.latent_heat", REQUIRED,
+                         "latent heat needs both latent_heat (J/kg) and melting_temperature (K)", n)
+
+
+def _check_pneumatic(s) -> None:
+    """Cross-field rules of motion model 'pneumatic' (drumheat.motion.pneumatic)."""
+    n = s.name
+    check_apparatus_tables(s, "channel", "height, gap, depth, length, gas_velocity, "
+                           "solids_mass_flow", "of the channel")
+    if s.gas is None:
+        raise SceneError("gas.temperature", REQUIRED, "motion model 'pneumatic' needs the gas inlet "
+                         "temperature [gas] temperature, in K", n)
+    for eff in ("contact", "wall", "loss", "radiation", "internal"):
+        if getattr(s.heat, eff) is not None:
+            raise SceneError(f"heat.{eff}", "a table", "motion model 'pneumatic' exchanges heat "
+                             "with the gas only ([heat.convection]); remove this table", n)
+    c = s.heat.convection
+    if c is not None:
+        if c.correlation == "fluidized-bed":
+            raise SceneError("heat.convection.correlation", c.correlation, "the channel uses a "
+                             "single-sphere correlation at each particle's slip speed, e.g. "
+                             "'gnielinski-kraychev'", n)
+        if c.velocity is not None:
+            raise SceneError("heat.convection.velocity", c.velocity, "motion model 'pneumatic' "
+                             "computes each particle's slip velocity; leave velocity out", n)
+        if c.porosity is not None:
+            raise SceneError("heat.convection.porosity", c.porosity, "not used by motion model "
+                             "'pneumatic' (single spheres in a dilute flow); leave it out", n)
+    if c is not None and c.properties == "gas" and s.gas.kinematic_viscosity is None:
+        raise SceneError("gas.kinematic_viscosity", REQUIRED, "properties = 'gas' takes the drag's "
+                         "viscosity from [gas]: give kinematic_viscosity, in m2/s", n)
+    for key in ("record_interval", "replay_after"):
+        if getattr(s.dem, key) is not None:
+            raise SceneError(f"dem.{key}", getattr(s.dem, key), "not supported by motion model "
+                             "'pneumatic'; leave it out", n)
+    if s.dem.thermal_substeps != 1 or s.dem.settle_time != 0:
+        key = "thermal_substeps" if s.dem.thermal_substeps != 1 else "settle_time"
+        raise SceneError(f"dem.{key}", getattr(s.dem, key), "motion model 'pneumatic' takes a "
+                         "heat step every mechanical step and starts with an empty channel; "
+                         "leave it out", n)
+    ch = s.channel
+    d_max = max(g.diameter for g in s.groups)
+    if ch.gap <= d_max:
+        raise SceneError("channel.gap", ch.gap, f"must exceed the largest particle diameter "
+                         f"{d_max:g} m", n)
+    if ch.height <= 4 * d_max:
+        raise SceneError("channel.height", ch.height, "must be at least 4 particle diameters", n)
+    if ch.depth > ch.length * (1 + 1e-12):
+        raise SceneError("channel.depth", ch.depth, f"the simulated slice cannot be longer "
+                         f"than the channel, channel.length = {ch.length:g} m", n)
+    if ch.steady_after is not None and ch.steady_after >= s.run.duration:
+        raise SceneError("channel.steady_after", ch.steady_after, "must be shorter than "
+                         f"run.duration = {s.run.duration:g} s", n)
