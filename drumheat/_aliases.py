@@ -3,7 +3,9 @@
 The modules moved when the package was laid out in layers (docs/architecture.md). Importing an
 old path, e.g. ``import drumheat.mixing.dem`` or ``from drumheat.observe import alpha_overall``,
 returns the module at its new place and warns once with a :class:`DeprecationWarning` that
-names it. The table below is the only record of the moves.
+names it. The table below is the only record of the moves. ``drumheat.animate`` is not among
+them: the name is now the function :func:`drumheat.animate` (the module is
+:mod:`drumheat.results.animate`).
 """
 
 from __future__ import annotations
@@ -23,13 +25,14 @@ MOVED = {
     "drumheat.compile_cache": "drumheat.runner.compile_cache",
     "drumheat.progress": "drumheat.runner.progress",
     "drumheat.io": "drumheat.results.files",
-    "drumheat.animate": "drumheat.results.animate",
     "drumheat.vtk_export": "drumheat.results.vtk",
     "drumheat.trajectory": "drumheat.motion.trajectory",
-    "drumheat.observe": "drumheat.analysis.observe",
+    "drumheat.observe": "drumheat.results.observe",
     "drumheat.advisor": "drumheat.analysis.advisor",
     "drumheat.calibrate": "drumheat.analysis.calibrate",
     "drumheat.thermochromic": "drumheat.experiments.thermochromic",
+    "drumheat.thermal.composer": "drumheat.thermal.model",
+    "drumheat.thermal.integrate": "drumheat.thermal.solvers",
 }
 
 

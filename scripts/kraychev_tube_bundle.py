@@ -49,9 +49,9 @@ MATERIALS = {
 def run_case(name: str, S: float, duration: float, measure_from: float, out: Path,
              depth_factor: float = 5.0) -> dict:
     from drumheat.materials import material
-    from drumheat.motion.moving_bed import particles_to_fill
+    import drumheat as dh
     from drumheat.models.moving_bed import alpha_tube_bundle, discharge_velocity
-    from drumheat.runner.loop import energy_balance, make_motion
+    from drumheat.motion.moving_bed import measure, particles_to_fill
     from drumheat.scene import load_scene
 
     m = MATERIALS[name]
@@ -64,11 +64,11 @@ def run_case(name: str, S: float, duration: float, measure_from: float, out: Pat
     count = particles_to_fill(scene.hopper, d, 0.008)
     scene = scene.with_overrides({"groups.0.count": count})
     t0 = time.perf_counter()
-    bed = make_motion(scene)
-    traj = bed.trajectory(progress=False)
+    result = dh.run(scene, progress=False)
+    traj = result.trajectory
     wall = time.perf_counter() - t0
-    res = bed.measure()
-    _, rel = energy_balance(traj)
+    res = measure(result)
+    rel = result.summary["energy_balance_rel_error"]
     mat = material(m["material"])
     W55 = float(discharge_velocity(S, d))
     W_dem = res["W_p_axis"]
@@ -87,7 +87,7 @@ def run_case(name: str, S: float, duration: float, measure_from: float, out: Pat
                depth=scene.hopper.depth, duration=duration, wall_time_s=wall,
                W_p_eq55=W55, alpha_corr=a_corr, alpha_corr_eq55=a_corr55, Pe_star=pe,
                energy_balance_rel_error=rel, t=np.asarray(traj.t).tolist(), series=ts,
-               Q_tubes_each=(bed.records["Q_tubes"][-1]).tolist(),
+               Q_tubes_each=(traj.records["Q_tubes"][-1]).tolist(),
                **{k: v for k, v in res.items()})
     out.mkdir(parents=True, exist_ok=True)
     tag = "" if depth_factor == 5.0 else f"_depth{depth_factor:g}"

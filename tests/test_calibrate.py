@@ -11,7 +11,8 @@ import pytest
 
 from drumheat.analysis.calibrate import (CalibrationDataError, Experiment, calibrate_lambda_bed, fit,
                                 read_measurements)
-from drumheat.runner.loop import make_motion
+from drumheat.motion import make_motion
+from drumheat.runner import trace
 from drumheat.scene import load_scene, scene_from_dict
 
 DATA = files("drumheat") / "data"
@@ -37,7 +38,7 @@ def _objective(bed):
     w = np.linspace(1.0, 2.0, 70)  # weighted particle average: depends on all three keys
 
     def f(p):
-        T, Q = bed.solve(dict(zip(KEYS, p)))
+        T, Q = trace(bed, dict(zip(KEYS, p)))
         return T[-1] @ w / w.sum() + 1e-3 * Q["wall"][-1]
 
     return f
@@ -54,15 +55,13 @@ def _central_differences(f, p0, rel=1e-4):
     return np.array(out)
 
 
-def _bed():
-    bed = make_motion(mini_wall())
-    bed.t_out = np.array([0.0, 100.0, 300.0])
-    return bed
+def _bed(autodiff="reverse"):
+    return make_motion(mini_wall()).with_options(times=np.array([0.0, 100.0, 300.0]),
+                                                 autodiff=autodiff)
 
 
 def test_forward_mode_gradient_of_a_full_run_matches_central_differences():
-    bed = _bed()
-    bed.autodiff = "forward"
+    bed = _bed("forward")
     f = _objective(bed)
     p0 = jnp.array([57.0, 114.0, 293.0])
     g = np.asarray(jax.jacfwd(f)(p0))

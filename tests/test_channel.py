@@ -10,7 +10,8 @@ import pytest
 
 from drumheat.motion.pneumatic import PneumaticChannel, cocurrent_outlet, march_gas
 from drumheat.models import drag
-from drumheat.runner.loop import energy_balance
+from drumheat.results.result import energy_balance
+from drumheat.runner import simulate
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 from drumheat.thermal.convection import _air_clipped, nusselt_alpha
 
@@ -44,11 +45,12 @@ def channel_scene(*, d, rho, count, height, gap, depth, u, m_s, v_in=0.0, durati
 
 
 def run(scene):
+    """The channel model, its trajectory, its final state and the steady-window evaluation."""
     model = PneumaticChannel(scene)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a single particle leaves the feeder "starved"
-        traj = model.trajectory(progress=False)
-    return model, traj
+        traj, state = simulate(model, progress=False, return_state=True)
+    return model, traj, state, traj.info.get("channel")
 
 
 def test_scene_loads_and_wheat_rises():
@@ -69,8 +71,7 @@ def test_single_particle_reaches_terminal_slip():
     d, rho_p, u = 50e-6, 1315.0, 0.5
     scene = channel_scene(d=d, rho=rho_p, count=1, height=0.2, gap=0.005, depth=0.012, u=u,
                           m_s=1e-3, duration=0.3, dt=2e-4, skin=0.005, stiffness=1e-4)
-    model, traj = run(scene)
-    st = model.final_state
+    model, traj, st, _ = run(scene)
     assert bool(st.extra["active"][0])
     rho, _, _, nu = (float(x) for x in _air_clipped(T_GAS))
     W_t = float(drag.terminal_velocity(d, rho_p, rho, nu * rho, "schiller_naumann", g=9.81))
@@ -88,8 +89,7 @@ def test_particle_temperature_follows_gnielinski_exponential():
     scene = channel_scene(d=d, rho=rho_p, count=1, height=0.1, gap=0.018, depth=0.02, u=W_t,
                           m_s=10.0, duration=0.5, output_interval=0.1, dt=1e-4, stiffness=10.0,
                           convection={"correlation": "gnielinski-kraychev"}, coupling="none")
-    model, traj = run(scene)
-    st = model.final_state
+    model, traj, st, _ = run(scene)
     assert abs(float(st.velocity[0, 1])) < 1e-9 and bool(st.extra["active"][0])
     alpha = float(nusselt_alpha("gnielinski-kraychev", d, W_t, rho, cp, lam, nu))
     tau = rho_p * c * d / (6 * alpha)
@@ -111,8 +111,7 @@ def busy_channel():
 
 
 def test_energy_balance_closes_to_round_off(busy_channel):
-    model, traj = busy_channel
-    st = model.final_state
+    model, traj, st, _ = busy_channel
     assert float(np.sum(traj.n_contacts)) > 0  # collisions happened
     stored = (traj.T - traj.T[0]) @ traj.capacity
     q_gas, q_flow = traj.Q["gas"], traj.Q["flow"]
@@ -129,11 +128,10 @@ def test_energy_balance_closes_to_round_off(busy_channel):
 
 
 def test_exits_are_parked_and_reenter_at_inlet_temperature(busy_channel):
-    model, traj = busy_channel
+    model, traj, st, steady = busy_channel
     _, _, boundary = model._hooks()
-    st = model.final_state
     ex = st.extra
-    assert int(model.steady["released"]) > 0 and np.isfinite(traj.extra["T_particle_out"][-1])
+    assert int(steady["released"]) > 0 and np.isfinite(traj.extra["T_particle_out"][-1])
     parked = ~np.asarray(ex["active"])
     np.testing.assert_array_equal(np.asarray(ex["T"])[parked], model.T_inlet[parked])
     # one particle pushed past the outlet with a marked temperature
@@ -192,8 +190,7 @@ def test_gas_outlet_matches_cocurrent_ntu_solution():
                           stiffness=100.0, convection={"correlation": "constant",
                                                        "alpha": 2000.0},
                           properties="gas", c=c, cells=40, steady=0.15)
-    model, traj = run(scene)
-    ev = model.steady
+    model, traj, _, ev = run(scene)
     assert ev["starved_steps"] == 0 and ev["blocked_steps"] == 0
     assert ev["velocity_mean"] == pytest.approx(v, rel=1e-6)  # nobody collided
     C_s, C_g = ev["solids_mass_flow"] * c, m_gas * 1000.0

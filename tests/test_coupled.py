@@ -5,7 +5,7 @@ import pytest
 
 import drumheat as dh
 from drumheat.mechanics.deposition import Packing
-from drumheat.runner.loop import make_motion
+from drumheat.motion import make_motion
 from drumheat.scene import load_scene, scene_from_dict
 
 
@@ -62,7 +62,7 @@ def test_resting_dem_bed_matches_the_static_model():
     # and the DEM bed genuinely differ after a while.)
     import jax.numpy as jnp
 
-    from drumheat.motion.dem import initial_extra, thermal_network
+    from drumheat.motion.coupling import initial_extra, thermal_network
     from drumheat.thermal.network import ContactNetwork, find_contacts_2d_drum
 
     scene = dem_scene(**{"drum.rpm": 0.0})

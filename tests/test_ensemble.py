@@ -135,12 +135,48 @@ def test_dem_mechanics_that_differ_are_refused():
 
 
 def test_models_without_vmapping_run_one_by_one_with_a_warning():
-    base = static_scene().with_overrides({"motion.model": "random", "motion.t_R": 40.0,
-                                          "run.duration": 60.0})
-    variants = [{"heat.contact.alpha": 80.0}, {"heat.contact.alpha": 120.0}]
+    base = load_scene("staltner-slag-particle", {"heat.internal.shells": 20,
+                                                 "granulator.steps_per_phase": 40})
+    variants = [{"groups.0.diameter": 0.001}, {"groups.0.diameter": 0.002}]
     with pytest.warns(EnsembleWarning, match="one after the other"):
         ens = dh.run_ensemble(base, variants, progress=False)
     assert not ens.vmapped
+    for r, v in zip(ens, variants):
+        ref = dh.run(base.with_overrides(v), progress=False)
+        np.testing.assert_array_equal(r.T, ref.T)
+
+
+@pytest.mark.parametrize("model", ["random", "replay"])
+def test_random_and_replay_ensembles_equal_individual_runs(model, tmp_path):
+    """Every pure motion model runs its variants as one vmapped program (the generic loop
+    over vmap(advance)), with the results of single runs."""
+    if model == "random":
+        base = static_scene().with_overrides({"motion.model": "random", "motion.t_R": 40.0,
+                                              "run.duration": 100.0})
+        variants = [{"heat.contact.alpha": 80.0}, {"heat.contact.alpha": 120.0, "run.seed": 5}]
+    else:  # a replay of a short recording, variants in the thermal parameters
+        rec = dem_scene(**{"dem.record_interval": 1.25e-4 / 5})
+        dh.run(rec, out=tmp_path / "rec", progress=False)
+        raw = rec.to_dict()
+        raw["motion"] = {"model": "replay"}
+        raw["replay"] = {"file": str(tmp_path / "rec" / "contacts.npz")}
+        raw["run"]["duration"] = 10 * raw["run"]["output_interval"]
+        del raw["dem"]
+        base = scene_from_dict(raw)
+        variants = [{"heat.contact.alpha": 5.0e4}, {"heat.contact.alpha": 2.0e5,
+                                                    "groups.1.temperature": 320.0}]
+    ens = dh.run_ensemble(base, variants, progress=False)
+    assert ens.vmapped
+    assert_same_results(ens, [base.with_overrides(v) for v in variants])
+    assert not np.allclose(ens[0].T[-1], ens[1].T[-1])
+
+
+def test_fluidized_ensemble_equals_individual_runs():
+    base = load_scene("fluidized-bed-coffee", {"run.duration": 20.0, "groups.0.count": 40,
+                                               "heat.internal.shells": 8})
+    variants = [{"gas.temperature": 293.15}, {"gas.temperature": 303.15, "run.seed": 4}]
+    ens = dh.run_ensemble(base, variants, progress=False)
+    assert ens.vmapped
     assert_same_results(ens, [base.with_overrides(v) for v in variants])
 
 

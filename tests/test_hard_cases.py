@@ -19,7 +19,7 @@ import pytest
 
 import drumheat as dh
 from drumheat.motion.static import StaticBed
-from drumheat.runner.loop import make_motion
+from drumheat.motion import make_motion
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 from drumheat.thermal import internal
 from drumheat.thermal.integrate import initial_state

@@ -9,7 +9,7 @@ import pytest
 from drumheat.geometry.walls import DrumShell, InnerCylinder, RadialPlate
 from drumheat.mechanics.analysis import section_contact_lengths
 from drumheat.mechanics.pour import section_of
-from drumheat.motion.dem import drum_walls
+from drumheat.assemble import drum_walls
 from drumheat.models.sectional_drum import bed_polygon, contact_lengths
 from drumheat.scene import SceneError, builtin_scenes, load_scene
 
@@ -43,14 +43,11 @@ def test_scene_is_listed_and_builds_ten_walls():
 
 
 def test_plain_drum_keeps_one_wall_account():
-    from drumheat.assemble import scene_values
-    from drumheat.thermal.composer import make_thermal_model
-    from drumheat.assemble import make_particles
+    from drumheat.assemble import thermal_model
 
     scene = load_scene("weigler-glass-drum-9.55")
     assert scene.drum.heated_surfaces() == (("wall", "drum.wall_temperature"),)
-    value = scene_values(scene)
-    model = make_thermal_model(scene, make_particles(scene, value), value)
+    model, _ = thermal_model(scene)
     assert model.accounts == ("wall",)
     assert drum_walls(scene)[0].wall_id == 0 and len(drum_walls(scene)) == 1
 

@@ -13,7 +13,7 @@ import pytest
 from scipy.special import erf
 
 import drumheat  # noqa: F401  (enables float64)
-from drumheat.analysis import observe as ob
+from drumheat.results import observe as ob
 from drumheat.models import penetration as pm
 
 # Ch. 5.2 glass bed (digest sections 6.4, 10): 370 spheres of 8 mm, 40 wall contacts

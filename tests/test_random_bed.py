@@ -7,7 +7,8 @@ import pytest
 
 import drumheat as dh
 from drumheat.motion.random import RandomBed
-from drumheat.runner.loop import energy_balance, make_motion
+from drumheat.motion import make_motion
+from drumheat.runner import trace
 from drumheat.scene import load_scene, scene_from_dict
 
 
@@ -58,10 +59,10 @@ def test_remix_conserves_the_mean():
     assert np.sum(C * Tm) == pytest.approx(np.sum(C * T), rel=1e-15)
     # over a whole run with outputs just before and after each re-mix the mean is continuous
     scene = mini(remix="mean").with_overrides({"run.duration": 60.0})
-    bed = make_motion(scene)
     eps = 1e-6
-    bed.t_out = np.array([0.0, 20.0 - eps, 20.0, 20.0 + eps, 40.0 - eps, 40.0, 40.0 + eps, 60.0])
-    T, Q = bed.solve()
+    bed = make_motion(scene).with_options(times=np.array(
+        [0.0, 20.0 - eps, 20.0, 20.0 + eps, 40.0 - eps, 40.0, 40.0 + eps, 60.0]))
+    T, Q = trace(bed)
     Tcap = np.asarray(T) @ C / C.sum()
     assert abs(Tcap[3] - Tcap[1]) < 1e-5 and abs(Tcap[6] - Tcap[4]) < 1e-5  # ~ q eps / C
     assert np.ptp(np.asarray(T)[3]) < 1e-3 < np.ptp(np.asarray(T)[2])  # reset after 20 s
@@ -142,12 +143,11 @@ def test_unequal_particles_swap_only_within_their_size_and_conserve_energy():
 
 def test_gradient_matches_central_differences():
     s = mini().with_overrides({"run.duration": 100.0, "run.rtol": 1e-12, "run.atol": 1e-10})
-    bed = make_motion(s)
-    bed.autodiff = "forward"
+    bed = make_motion(s).with_options(autodiff="forward")
     w = np.arange(70) % 7 + 1.0  # a weighted particle average, sensitive to both parameters
 
     def f(p):
-        T, _ = bed.solve({"heat.wall.alpha": p[0], "heat.contact.alpha": p[1]})
+        T, _ = trace(bed, {"heat.wall.alpha": p[0], "heat.contact.alpha": p[1]})
         return T[-1] @ w / w.sum()
 
     p0 = jnp.array([114.0, 57.0])

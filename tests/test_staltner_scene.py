@@ -7,8 +7,7 @@ import pandas as pd
 import pytest
 
 import drumheat as dh
-from drumheat.motion.granulator import droplet_speed, path_geometry, wall_heat_per_mass
-from drumheat.runner.loop import make_motion
+from drumheat.models.granulator import droplet_speed, path_geometry, wall_heat_per_mass
 from drumheat.scene import load_scene
 
 
@@ -20,9 +19,8 @@ def runs():
 
 def test_phase_times_and_enthalpy_matched_contact(runs):
     for d, res in runs.items():
-        motion = make_motion(res.scene)
-        motion._run()
-        ph = motion.phases
+        ph = res.trajectory.info["phases"]
+        assert res.summary["phases"] == ph
         g = res.scene.granulator
         p, v = path_geometry(g), droplet_speed(g)
         assert v == pytest.approx(0.8 * math.pi * 0.75 * 15.0)  # [4.1]
@@ -59,11 +57,10 @@ def test_result_files_and_balance(runs, tmp_path):
 def test_shell_and_step_convergence():
     res = {}
     for shells, steps in ((150, 400), (300, 1600)):
-        m = make_motion(load_scene("staltner-slag-particle", {
+        r = dh.run(load_scene("staltner-slag-particle", {
             "groups.0.diameter": 0.004, "heat.internal.shells": shells,
-            "granulator.steps_per_phase": steps}))
-        m._run()
-        res[shells] = m.phases
+            "granulator.steps_per_phase": steps}), progress=False)
+        res[shells] = r.trajectory.info["phases"]
     for a, b in zip(res[150], res[300]):
         assert a["T_mean_K"] == pytest.approx(b["T_mean_K"], abs=0.2)
         assert a["duration_s"] == pytest.approx(b["duration_s"], rel=0.01)

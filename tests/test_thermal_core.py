@@ -8,7 +8,7 @@ import pytest
 
 import drumheat as dh
 from drumheat.motion.static import StaticBed
-from drumheat.runner.loop import energy_balance
+from drumheat.results.result import energy_balance
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 from drumheat.thermal.contact import ContactConduction
 from drumheat.thermal.integrate import _vector_field, initial_state

@@ -1,4 +1,4 @@
-"""Scene ``kraychev-tube-bundle`` and motion model ``moving_bed`` (drumheat/mixing/moving_bed.py).
+"""Scene ``kraychev-tube-bundle`` and motion model ``moving_bed`` (drumheat/motion/moving_bed.py).
 
 Geometry of the staggered bundle and the slit, the recycling boundary (inlet temperature, no
 particle lost, discharge counter = recycled particles), per-tube heat accounts and the energy
@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from drumheat.geometry.walls import FixedCylinder, Plane, Segment
-from drumheat.motion.moving_bed import MovingBed, hopper_walls, particles_to_fill
-from drumheat.runner.loop import build_timeseries, energy_balance
+from drumheat.motion.moving_bed import MovingBed, hopper_walls, measure, particles_to_fill
+from drumheat.results.result import build_timeseries, energy_balance
+from drumheat.runner import simulate
 from drumheat.scene import SceneError, load_scene
 
 # a small, fast variant: one pitch deep in rows, 2 pitches wide, ~60 particles of 4 mm
@@ -82,7 +83,7 @@ def test_recycling_hook_resets_particle():
     pos = bed.packing_positions().copy()
     pos[0] = [0.0, bed.y_exit - 0.002, 0.005]
     state = dem.init(pos)
-    from drumheat.motion.dem import initial_extra
+    from drumheat.motion.coupling import initial_extra
 
     extra = initial_extra(model, T0, state.nbrs.idx.shape[1], bed.n, bed.n_walls,
                           per_wall=True, accounts=("inflow",))
@@ -90,7 +91,7 @@ def test_recycling_hook_resets_particle():
     extra["flow"] = bed.initial_flow()
     state = state._replace(extra=extra, velocity=state.velocity.at[0].set([0.1, -0.5, 0.0]),
                            wall_spring=state.wall_spring.at[0].set(1e-4))
-    new = jax.jit(bed.make_boundary(model))(state)
+    new = jax.jit(bed.make_boundary())(state)
     p = np.asarray(new.position[0])
     assert np.min(np.linalg.norm(bed.sites - p, axis=1)) < 1e-12  # on an insertion site
     assert float(new.extra["T"][0]) == s.hopper.inlet_temperature
@@ -109,13 +110,13 @@ def test_recycling_hook_resets_particle():
 def test_short_run_recycles_and_balances_energy():
     s = _small(0.016, 0.3)
     bed = MovingBed(s)
-    traj = bed.trajectory(progress=False)
-    r = bed.records
+    traj = simulate(bed, progress=False)
+    r = traj.records
     n_out = int(r["n_out"][-1])
     assert n_out > 0, "nothing flowed through a 16 mm slit"
     # the discharge counter is the number of recycled particles, the mass their mass
-    assert int(bed.passes.sum()) == n_out
-    assert r["m_out"][-1] == pytest.approx(float(np.sum(bed.passes * np.asarray(bed.mech.mass))))
+    assert int(r["passes"].sum()) == n_out
+    assert r["m_out"][-1] == pytest.approx(float(np.sum(r["passes"] * np.asarray(bed.mech.mass))))
     # no particle lost: all inside the hopper (or waiting just below the slit)
     pos = traj.position[-1]
     assert np.all(np.isfinite(pos))
@@ -136,7 +137,7 @@ def test_short_run_recycles_and_balances_energy():
     stored = (traj.T[-1] - traj.T[0]) @ traj.capacity
     assert stored == pytest.approx(traj.Q["wall"][-1] + traj.Q["inflow"][-1], rel=1e-9)
     assert energy_balance(traj)[1] < 1e-9
-    m = bed.measure()
+    m = measure(traj)
     assert m["n_discharged"] == n_out and m["mass_flow"] > 0 and m["alpha_1"] > 0
 
 
@@ -146,9 +147,8 @@ def test_slit_narrower_than_a_particle_lets_nothing_through():
     # lips' vertical support of a particle sinking between them is at most ~2 k (d - S)/2 x its
     # sine), so the test uses a clearly narrower slit
     s = _small(0.0024, 0.15)
-    bed = MovingBed(s)
-    traj = bed.trajectory(progress=False)
-    assert int(bed.records["n_out"][-1]) == 0
+    traj = simulate(MovingBed(s), progress=False)
+    assert int(traj.records["n_out"][-1]) == 0
     assert traj.Q["inflow"][-1] == 0.0
     r = 0.5 * s.groups[0].diameter
     assert traj.position[:, :, 1].min() > -r  # nobody below the lips

@@ -20,7 +20,7 @@ def write_result(folder, dim=2, moving=True):
     if dim == 3:
         over = {"dim": 3, "drum.depth": 0.01, "packing.method": "file",
                 "packing.file": "packing.npz"}
-    scene = load_scene("weigler-static", overrides=over)
+    scene = load_scene("weigler-static", overrides=over, check_files=False)  # a fake result
     n = 12
     rng = np.random.default_rng(0)
     pos0 = rng.uniform(-0.015, 0.015, size=(n, dim))

@@ -33,7 +33,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import jax.numpy as jnp
 import numpy as np
+
+from drumheat.assemble import contact_gas, scene_values
+from drumheat.geometry.hopper import hopper_walls
+from drumheat.materials import gas, material
+from drumheat.models import schluender
+from drumheat.models.granulator import wall_heat_per_mass
+from drumheat.models.sectional_drum import cycle_means
+from drumheat.models.sphere_conduction import effusivity
+from drumheat.motion import make_motion
+from drumheat.scene import Scene, SceneError, load_scene
+from drumheat.thermal.convection import PlugFlowConvection
 
 SIGMA = 5.670374419e-8
 
@@ -83,8 +95,6 @@ class Advice:
 
 
 def _props(scene):
-    from drumheat.materials import material
-
     N = scene.n_particles
     d = sum(g.count * g.diameter for g in scene.groups) / N
     g0 = scene.groups[0]
@@ -102,25 +112,20 @@ def _props(scene):
 
 def explain(scene) -> Advice:
     """Sizes of all effects for ``scene`` (a Scene, a built-in name or a path)."""
-    from drumheat.runner.loop import make_motion
-    from drumheat.scene import Scene, load_scene
-
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     d, lam_p, eps, rho, c, T0, spread = _props(scene)
     N = scene.n_particles
     A_s, A_p = math.pi * d**2, math.pi * d**2 / 4
     motion = make_motion(scene)
-    if not hasattr(motion, "model"):
-        from drumheat.scene import SceneError
-
+    model, _ = motion.model()
+    if model is None:
         raise SceneError("motion.model", scene.motion.model,
                          "'drumheat explain' sizes the effects of beds whose heat runs through "
                          "the thermal network (static, random, replay, dem, granulator, "
-                         "fluidized); this motion model couples its gas itself and reports its "
-                         "heat balance in the result files", scene.name)
-    model, _ = motion.model()
-    eff = {type(e).__name__: e for e in model.effects}
+                         "fluidized, moving_bed); this motion model couples its gas itself and "
+                         "reports its heat balance in the result files", scene.name)
+    eff = {name: model.effect(name) for name in model.names}
     Tg = scene.gas.temperature if scene.gas is not None else None
     T_wall = scene.drum.wall_temperature if scene.drum is not None else None
     moving_bed = scene.motion.model == "moving_bed"
@@ -139,8 +144,8 @@ def explain(scene) -> Advice:
         z = 0.0 if scene.motion.model in ("granulator", "fluidized") else (4.0 if scene.dim == 2
                                                                            else 6.0)
         frac_wall, wall_note = _wall_layer_fraction(scene, d)
-    if "ContactConduction" in eff:
-        alpha_pp = float(np.asarray(eff["ContactConduction"].alpha))
+    if "contact" in eff:
+        alpha_pp = float(np.asarray(eff["contact"].alpha))
     else:
         alpha_pp = _schluender_alpha(scene, d)[1]
     contact = Term("contact conduction", "[heat.contact]", scene.heat.contact is not None,
@@ -150,13 +155,8 @@ def explain(scene) -> Advice:
     terms.append(contact)
     # wall
     if scene.motion.model == "granulator":
-        from drumheat.motion.granulator import wall_heat_per_mass
-        from drumheat.models.sphere_conduction import effusivity
-
         g = scene.granulator
         mat = model.internal.material
-        import jax.numpy as jnp
-
         Ts = jnp.asarray([T0])
         b_S = float(effusivity(mat.conductivity(Ts), mat.heat_capacity(Ts), rho)[0])
         b_W = float(effusivity(g.wall_conductivity, g.wall_heat_capacity, g.wall_density))
@@ -168,7 +168,7 @@ def explain(scene) -> Advice:
                           f"two semi-infinite bodies, mean 2 b/sqrt(pi t2) = {h2:.3g} W/(m2 K) "
                           f"over t2 ~ {1e3 * t2:.3g} ms (Phase 2 only)"))
     elif T_wall is not None or scene.heat.wall is not None:
-        alpha_wp = float(np.asarray(eff["WallConduction"].alpha)) if "WallConduction" in eff \
+        alpha_wp = float(np.asarray(eff["wall"].alpha)) if "wall" in eff \
             else _schluender_alpha(scene, d)[0]
         terms.append(Term("wall contact", "[heat.wall]", scene.heat.wall is not None,
                           alpha_wp * A_p * frac_wall, (T_wall or T0) - T0,
@@ -188,23 +188,20 @@ def explain(scene) -> Advice:
                           0.0, 0.0, "no gas flows through the moving bed (no secondary gas): "
                           "the gas in the voids moves with the particles"))
     elif Tg is not None:
-        if "Convection" in eff or "PlugFlowConvection" in eff:
-            conv = eff.get("Convection") or eff["PlugFlowConvection"].convection
-            import jax.numpy as jnp
-
+        if "convection" in eff:
+            conv = eff["convection"]
+            conv = conv.convection if isinstance(conv, PlugFlowConvection) else conv
             a = float(conv.alpha(jnp.full(N, T0), model.particles)[0])
             note = f"alpha = {a:.3g} W/(m2 K) ({scene.heat.convection.correlation})"
         else:
-            from drumheat.materials import gas
-
             lam_g = scene.gas.conductivity or gas(scene.gas.material).conductivity
             a = 2.0 * lam_g / d
             note = f"estimate: conduction limit Nu = 2, alpha = {a:.3g} W/(m2 K)"
         terms.append(Term("convection", "[heat.convection]", scene.heat.convection is not None,
                           a * A_s, Tg - T0, note))
     # radiation
-    if "Radiation" in eff:
-        r = eff["Radiation"]
+    if "radiation" in eff:
+        r = eff["radiation"]
         Tr = float(np.asarray(r.sink_temperature)[0])
         e = float(np.asarray(r.emissivity)[0])
         note = f"eps = {e:.2g}, T_rad = {Tr:.1f} K"
@@ -267,8 +264,6 @@ def explain(scene) -> Advice:
             f" (lambda_p = {lam_p:.3g} W/(m K) of the group; the T-dependent shell material varies)"
         if scene.motion.model == "granulator":
             mat = model.internal.material
-            import jax.numpy as jnp
-
             lam_p = float(mat.conductivity(jnp.asarray(T0)))
             G_flight = sum(t.conductance for t in terms if t.included and "Phase 2" not in t.name)
             Bi = G_flight / A_s * (d / 2) / lam_p
@@ -277,9 +272,16 @@ def explain(scene) -> Advice:
         verdict = ("[heat.internal] included and needed (Bi > 0.1)" if Bi > 0.1 else
                    "[heat.internal] included but could be dropped (Bi < 0.1: lumped particles "
                    "suffice)") + lam_note
+    elif Bi < 0.1:
+        verdict = "lumped particles are fine (Bi < 0.1); [heat.internal] not needed"
     else:
-        verdict = ("lumped particles are fine (Bi < 0.1); [heat.internal] not needed" if Bi < 0.1
-                   else "internal gradients matter (Bi > 0.1): add [heat.internal]")
+        try:  # recommend only what this scene's motion model can do
+            scene.replace({"heat.internal": {}})
+            verdict = "internal gradients matter (Bi > 0.1): add [heat.internal]"
+        except SceneError as err:
+            verdict = ("internal gradients matter (Bi > 0.1), but this scene cannot resolve "
+                       f"them ({err.allowed}); read the lumped temperatures as the particles' "
+                       "mean and expect the surface to run ahead of it")
     cond = (f"conditions at t = 0: {N} particle(s), d = {1e3 * d:.3g} mm "
             f"{scene.groups[0].material}, T = {T0:.2f} K, motion '{scene.motion.model}'"
             + (f", gas {Tg:.2f} K" if Tg is not None else "")
@@ -310,8 +312,6 @@ def _wall_layer_fraction(scene, d):
     area_p = sum(g.count * math.pi * g.diameter**2 / 4 for g in scene.groups)
     beta, phi2 = 0.6, 0.8
     if scene.motion.model == "moving_bed":
-        from drumheat.motion.moving_bed import hopper_walls
-
         h = scene.hopper
         g = hopper_walls(h)
         A = float(np.sum(g.tube_fraction)) * math.pi * h.tube_diameter * h.depth
@@ -327,8 +327,6 @@ def _wall_layer_fraction(scene, d):
     else:
         bed_area, per_length = area_p / phi2, 1.0 / d
     if dr.sections:
-        from drumheat.models.sectional_drum import cycle_means
-
         R2 = 0.5 * (dr.inner_diameter or 0.0)
         sec_area = (math.pi * (R * R - R2 * R2)) / dr.sections
         fill = min(0.95, bed_area / dr.sections / sec_area)
@@ -352,8 +350,10 @@ def _wall_layer_fraction(scene, d):
 
 def _schluender_alpha(scene, d):
     """(alpha_wp, alpha_pp) from weigler eqs. [2.8]-[2.10] for the scene's gas."""
-    from drumheat.thermal.composer import _schluender
-
-    value = lambda key: scene.get(key)
-    a_wp, a_pp = _schluender(scene, value, d)
+    g = contact_gas(scene, scene_values(scene))
+    a_wp, a_pp = schluender.contact_coefficients(d, T=g.temperature, p=g.pressure,
+                                                 conductivity=g.conductivity,
+                                                 heat_capacity=g.heat_capacity,
+                                                 molar_mass=g.molar_mass,
+                                                 C=g.accommodation_constant)
     return float(a_wp), float(a_pp)

@@ -49,9 +49,11 @@ import numpy as np
 import optax
 import pandas as pd
 
-from drumheat.analysis import observe
+from drumheat.results import observe
 from drumheat.assemble import group_index
 from drumheat.scene import Scene, load_scene
+from drumheat.motion import make_motion
+from drumheat.runner.loop import trace
 
 __all__ = [
     "CalibrationDataError",
@@ -386,6 +388,16 @@ class FitResult:
 # ---------------------------------------------------------------------------------------------
 
 
+def _with_value(f):
+    """``x -> (f(x), f(x))`` from one evaluation of ``f``: with ``jax.jacfwd(..., has_aux=True)``
+    the Jacobian and the value come from the same forward pass."""
+    def g(x):
+        y = f(x)
+        return y, y
+
+    return g
+
+
 @dataclass
 class _Prepared:
     name: str
@@ -398,8 +410,6 @@ class _Prepared:
 
 
 def _prepare(experiments, data, keys):
-    from drumheat.runner.loop import make_motion
-
     if isinstance(experiments, (Scene, str, Path)):
         if data is None:
             raise CalibrationDataError("fit(scene, data, params): no data given")
@@ -429,8 +439,13 @@ def _prepare(experiments, data, keys):
     for name, scene, df in checked:  # packings and contacts are built once per scene
         key = scene.to_toml()
         if key not in motions:
-            motions[key] = make_motion(scene)
-            motions[key].autodiff = "forward"
+            motion = make_motion(scene)
+            if not motion.differentiable:
+                raise CalibrationDataError(f"experiment {name!r}: motion model "
+                                           f"{scene.motion.model!r} cannot be differentiated; "
+                                           "fit with a static, random, replay or fluidized "
+                                           "scene")
+            motions[key] = motion.with_options(autodiff="forward")
         grid = np.unique(np.concatenate([[0.0], df["t"].to_numpy()]))
         prepared.append(_Prepared(name, scene, motions[key], df, grid,
                                   [c for c in df.columns if c != "t"]))
@@ -439,9 +454,8 @@ def _prepare(experiments, data, keys):
 
 def _predict(p: _Prepared, params: dict, grid=None):
     """Model mean temperatures {column: (n_grid,)} of one experiment on ``grid``."""
-    m = p.motion
-    m.t_out = p.grid if grid is None else grid
-    T, _ = m.solve(params)
+    m = p.motion.with_options(times=p.grid if grid is None else grid)
+    T, _ = trace(m, params)
     model, _ = m.model(params)
     mass = model.particles.mass
     group = group_index(p.scene)
@@ -552,8 +566,8 @@ def fit(experiments, data=None, params: Sequence[str] | dict | None = None, *,
     def residual(u):
         return model_vector(u) - y_j
 
-    def res_and_jac(u):
-        J, r = jax.jacfwd(lambda v: (residual(v), residual(v)), has_aux=True)(u)
+    def res_and_jac(u):  # one model evaluation gives the residual and its Jacobian
+        J, r = jax.jacfwd(_with_value(residual), has_aux=True)(u)
         return r, J
 
     def loss_of(r):
@@ -659,7 +673,6 @@ def fit(experiments, data=None, params: Sequence[str] | dict | None = None, *,
         t_dense = np.unique(np.concatenate([np.linspace(0.0, pp.grid[-1], dense), pp.grid]))
         pred = _predict(pp, {k: jnp.asarray(v) for k, v in est.items()}, grid=t_dense)
         curves[pp.name] = pd.DataFrame({"t": t_dense, **{c: np.asarray(v) for c, v in pred.items()}})
-        pp.motion.t_out = pp.grid
     return FitResult(names=keys, estimate=est, initial=x0, stderr=dict(zip(keys, se.tolist())),
                      covariance=cov, correlation=corr, sigma=sigma, n_data=n_data, dof=dof,
                      residuals=pd.concat(rows, ignore_index=True), history=pd.DataFrame(hist),
@@ -685,7 +698,7 @@ class LambdaBedPoint:
         Read-off time, s.
     criterion : str
         "slope" (the log-log slope reaches -0.5) or "inflection" (extremum of the slope curve,
-        the A7 fallback), see :func:`drumheat.analysis.observe.penetration_time`.
+        the A7 fallback), see :func:`drumheat.results.observe.penetration_time`.
     slope_at_time : float
         Slope of the curve used at ``time``.
     alpha_overall, alpha_bed : float
@@ -739,7 +752,7 @@ class LambdaBedCalibration:
 
     Attributes
     ----------
-    line : drumheat.analysis.observe.CalibrationLine
+    line : drumheat.results.observe.CalibrationLine
         ``lambda_bed = slope * alpha_pp + intercept``.
     points : list of LambdaBedPoint
     rho_bed, c_bed : float
@@ -845,11 +858,8 @@ class _LambdaContext:
 
     def __init__(self, scene, rho_bed, c_bed, alpha_ws, slope_of, times, t_range, which,
                  smooth):
-        from drumheat.runner.loop import make_motion
-
         self.scene = scene
-        self.motion = make_motion(scene)
-        self.motion.autodiff = "forward"
+        self.motion = make_motion(scene).with_options(autodiff="forward")
         d = np.asarray(self.motion.packing.diameter)
         self.n_wall = len(self.motion.wall_particles)
         self.area = float(np.sum(d[self.motion.wall_particles] ** 2))  # A7: d_p^2 N_w
@@ -859,12 +869,11 @@ class _LambdaContext:
         self.T_w = float(scene.drum.wall_temperature)
 
     def _mean(self, a_pp, grid):
-        m = self.motion
-        m.t_out = grid
+        m = self.motion.with_options(times=grid)
         params = {"heat.contact.alpha": a_pp}
-        T, _ = m.solve(params)
-        C = m.model(params)[0].particles.capacity
-        T0 = m.model(params)[1]
+        T, _ = trace(m, params)
+        model, T0 = m.model(params)
+        C = model.particles.capacity
         return T @ C / jnp.sum(C), jnp.sum(C), jnp.sum(C * T0) / jnp.sum(C)
 
     def _coefficients(self, t, Tm, C, T0):
@@ -904,7 +913,7 @@ class _LambdaContext:
         a = jnp.asarray(float(a_pp))
         if not derivative:
             return float(lam(a)), math.nan
-        d, v = jax.jacfwd(lambda x: (lam(x), lam(x)), has_aux=True)(a)
+        d, v = jax.jacfwd(_with_value(lam), has_aux=True)(a)
         return float(v), float(d)
 
 
@@ -926,7 +935,7 @@ def calibrate_lambda_bed(scene: Scene | str, alpha_pp_values: Sequence[float], *
     2. ``alpha_bed(t)`` from eq. [1.6], ``1/alpha_bed = 1/alpha_overall - 1/alpha_ws``;
     3. the log-log slope of ``alpha_overall`` (``slope_of="overall"``, the thesis text; the
        A7/A8 scripts take alpha_bed's, digest item 12.10), and the read-off time where it
-       reaches -0.5, else its inflection point (:func:`drumheat.analysis.observe.penetration_time`);
+       reaches -0.5, else its inflection point (:func:`drumheat.results.observe.penetration_time`);
     4. ``lambda_bed = alpha_bed^2 pi t / (4 rho_bed c_bed)`` (eq. [5.1]) at that time,
        evaluated by a run to exactly that time.
 
@@ -966,7 +975,7 @@ def calibrate_lambda_bed(scene: Scene | str, alpha_pp_values: Sequence[float], *
     t_min : float
         First time of the grid, s.
     t_range, which, smooth :
-        Passed to :func:`drumheat.analysis.observe.penetration_time`.
+        Passed to :func:`drumheat.results.observe.penetration_time`.
     through_origin : bool
         Fit the line through the origin.
 

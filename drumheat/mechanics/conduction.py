@@ -14,7 +14,7 @@ with one of two conductance laws:
 
 * ``"projected"``: ``g = h pi min(r_i, r_j)^2``, h = alpha_pp in W/(m^2 K) on the projected
   area ``A_p = pi d^2 / 4`` of the smaller sphere: weigler-thermal-dem.md eq. [2.7] (the same
-  law and area, :func:`drumheat.thermal.contact.projected_area`, as
+  law and area, :func:`drumheat.models.contact_conductance.projected_area`, as
   :class:`drumheat.thermal.contact.ContactConduction`).
 * ``"overlap"``: ``g = h sqrt(A_c)`` with ``A_c = pi a^2`` the area of the circle where the two
   spheres overlap, ``a^2 = r_i^2 - ((L^2 + r_i^2 - r_j^2) / 2L)^2`` at centre distance L, and
@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.thermal.contact import projected_area
+from drumheat.models.contact_conductance import projected_area
 
 __all__ = ["LAWS", "PairConduction", "pair_conductance", "heat_flow"]
 

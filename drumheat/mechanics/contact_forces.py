@@ -38,6 +38,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from drumheat.models.soft_sphere import critical_time_step, normal_stiffness_from_youngs  # noqa: F401,E501
 
 __all__ = [
     "ContactParams",
@@ -55,17 +56,8 @@ __all__ = [
 
 
 # ---------------------------------------------------------------------------------------------
-# parameter helpers
+# parameter helpers (k_n from E and the critical step are closed-form: drumheat.models.soft_sphere)
 # ---------------------------------------------------------------------------------------------
-
-
-def normal_stiffness_from_youngs(youngs_modulus, diameter):
-    """Linear contact stiffness ``k_n = E A_p / d_p`` with ``A_p = pi d_p^2 / 4`` (N/m).
-
-    Weigler digest [2.3] (elastic-bar analogy; with the linear model ``k_s = k_n``).
-    Aluminium, E = 7e10 Pa, d = 4 mm gives 2.2e8 N/m (Table 2-1: 2.18e8).
-    """
-    return youngs_modulus * (math.pi * diameter**2 / 4.0) / diameter
 
 
 def restitution_from_damping_ratio(zeta, model="no_attraction"):
@@ -141,14 +133,6 @@ def damping_coefficient(zeta, m_eff, k):
     Weigler digest sec. 5).
     """
     return 2.0 * zeta * jnp.sqrt(m_eff * k)
-
-
-def critical_time_step(m_min, k_max):
-    """Mechanical critical time step ``t_crit = 2 sqrt(m_min / k_max)`` (s), Weigler digest [2.1].
-
-    ``k_max`` is the largest contact stiffness (normal or tangential, particle or wall).
-    """
-    return 2.0 * math.sqrt(m_min / k_max)
 
 
 class ContactParams(eqx.Module):

@@ -38,6 +38,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from drumheat.environment import cache_dir_setting
 
 __all__ = ["TARGET", "available", "check_supported", "contacts", "load"]
 
@@ -47,8 +48,6 @@ _LOADED = False
 
 
 def _cache_dir() -> Path:
-    from drumheat.runner.compile_cache import cache_dir_setting
-
     env = cache_dir_setting()  # a compiled kernel needs a folder even with the JAX cache off
     return (Path(env) if env else Path.home() / ".cache" / "drumheat") / "kernels"
 

@@ -394,12 +394,12 @@ class DEM:
             callback: Optional[Callable] = None, max_reallocations: int = 8) -> DEMState:
         """Advance ``n_steps`` in chunks of ``chunk`` steps, checking after every chunk.
 
-        After each chunk: a neighbour/cell-list overflow discards the chunk, reallocates larger
-        buffers at the chunk's start state and redoes it (never continues with missing
-        contacts); NaN/Inf raises :class:`NonFiniteError`, a particle outside the domain
-        :class:`ParticleEscapeError`, an overlap above ``max_overlap`` x the smaller radius
-        :class:`OverlapError`; each carries the last good state (``err.state``).
-        ``callback(state)`` is called after each accepted chunk.
+        After each chunk (:meth:`check_chunk`): a neighbour/cell-list overflow discards the
+        chunk, reallocates larger buffers at the chunk's start state and redoes it (never
+        continues with missing contacts); NaN/Inf raises :class:`NonFiniteError`, a particle
+        outside the domain :class:`ParticleEscapeError`, an overlap above ``max_overlap`` x the
+        smaller radius :class:`OverlapError`; each carries the last good state
+        (``err.state``). ``callback(state)`` is called after each accepted chunk.
         """
         chunk = int(chunk or self.default_chunk)
         done = 0
@@ -408,36 +408,53 @@ class DEM:
             start = state._replace(max_overlap=jnp.zeros_like(state.max_overlap))
             for attempt in range(max_reallocations + 1):
                 new = self._run_steps(start, jnp.asarray(k, jnp.int32))
-                d = jax.device_get(self._diag(new))
-                if not d["overflow"]:
+                redo = self.check_chunk(start, new, attempt)
+                if redo is None:
                     break
-                code = int(new.nbrs.error.code)
-                cap = start.nbrs.idx.shape[1]
-                grow_pairs = bool(code & partition.PEC.NEIGHBOR_LIST_OVERFLOW)
-                grow_cells = bool(code & partition.PEC.CELL_LIST_OVERFLOW)
-                cell_cap = start.nbrs.cell_list_capacity or 0
-                need = cap
-                if grow_pairs:
-                    need = 2 * cap
-                    if bool(jnp.all(jnp.isfinite(new.position))):
-                        # pairs where the failed chunk ended: a good estimate of what it needs
-                        est = self.neighbor.count_pairs(new.position)
-                        need = max(need, int(est * self.neighbor.capacity_multiplier) + 1)
-                start = self.reallocate(
-                    start,
-                    pair_capacity=need,
-                    extra_cell_capacity=(max(1, cell_cap // 2) * (attempt + 1)
-                                         if grow_cells else 0))
+                start = redo
             else:
                 raise NeighborListError(
                     f"neighbour list overflowed {max_reallocations + 1} times in a row at step "
                     f"{int(state.step)}; the packing may be exploding", state)
-            self._check(d, new, state)
             state = new
             done += k
             if callback is not None:
                 callback(state)
         return state
+
+    def check_chunk(self, start: DEMState, new: DEMState, attempt: int = 0):
+        """Host-side check of a chunk run from ``start`` to ``new``.
+
+        Returns None when the chunk is good; a new start state (larger neighbour or cell-list
+        buffers, springs carried over) when a buffer overflowed and the chunk must be redone.
+        Raises :class:`NonFiniteError`, :class:`ParticleEscapeError` or :class:`OverlapError`
+        (carrying ``start`` as the last good state).
+        """
+        d = jax.device_get(self._diag(new))
+        if not d["overflow"]:
+            self._check(d, new, start)
+            return None
+        return self.grown(start, new, attempt)
+
+    def grown(self, start: DEMState, new: DEMState, attempt: int = 0) -> DEMState:
+        """``start`` with the buffers that ``new`` overflowed enlarged (pair capacity doubled
+        or sized from the pairs where ``new`` ended; cell capacity grown by half per
+        attempt)."""
+        code = int(new.nbrs.error.code)
+        cap = start.nbrs.idx.shape[1]
+        grow_pairs = bool(code & partition.PEC.NEIGHBOR_LIST_OVERFLOW)
+        grow_cells = bool(code & partition.PEC.CELL_LIST_OVERFLOW)
+        cell_cap = start.nbrs.cell_list_capacity or 0
+        need = cap
+        if grow_pairs:
+            need = 2 * cap
+            if bool(jnp.all(jnp.isfinite(new.position))):
+                # pairs where the failed chunk ended: a good estimate of what it needs
+                est = self.neighbor.count_pairs(new.position)
+                need = max(need, int(est * self.neighbor.capacity_multiplier) + 1)
+        return self.reallocate(
+            start, pair_capacity=need,
+            extra_cell_capacity=(max(1, cell_cap // 2) * (attempt + 1) if grow_cells else 0))
 
     def _check(self, d, new, last_good):
         t = float(last_good.time)

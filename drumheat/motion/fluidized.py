@@ -27,15 +27,16 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.assemble import group_index, initial_temperatures, make_particles, output_times, scene_values
+from drumheat import assemble
 from drumheat.models import convection as corr
-from drumheat.runner.progress import SimProgress
-from drumheat.scene import Scene
-from drumheat.thermal.composer import make_thermal_model
-from drumheat.thermal.convection import PlugFlowConvection, series_with_transient_sphere
-from drumheat.thermal.integrate import initial_state
-from drumheat.thermal.network import ContactNetwork
+from drumheat.motion.base import register
+from drumheat.motion.static import ThermalBed, thermal_solver
 from drumheat.motion.trajectory import Trajectory
+from drumheat.scene import Scene
+from drumheat.thermal.convection import PlugFlowConvection, series_with_transient_sphere
+from drumheat.thermal.effect import PlugFlow
+from drumheat.thermal.network import ContactNetwork
+from drumheat.thermal.solvers import initial_state
 
 
 @eqx.filter_jit
@@ -43,83 +44,101 @@ def _outlet(plug, Ts, particles):
     return plug.outlet_temperature(Ts, particles)
 
 
-class FluidizedBed:
-    """Batch fluidised bed, particle-resolved (module docstring)."""
+@register
+class FluidizedBed(ThermalBed):
+    """Batch fluidised bed, particle-resolved (module docstring).
 
-    autodiff = "reverse"
+    The state is ``{"model", "y", "layer", "deals"}``: the layer of every particle and the
+    layer assignments of all re-mixings of the run (drawn when the model is built, from
+    ``run.seed``), so that a run is a pure function of its state.
+    """
+
+    name = "fluidized"
+    vmappable = True
 
     def __init__(self, scene: Scene):
-        self.scene = scene
-        self.t_out = output_times(scene)
+        super().__init__(scene)
         self.net = ContactNetwork.from_arrays(np.zeros((0, 2)), np.zeros(0))
         self.layers = scene.motion.layers
         self.t_R = scene.motion.t_R
-        self._rng = np.random.default_rng([scene.run.seed, 2])
+        model, T0 = self.model()
+        self.solver = thermal_solver(scene, model, self.net, T0)
+        self.deals = self.deal(len(T0))
+
+    def deal(self, N: int) -> np.ndarray:
+        """The layer of every particle at the start and after each re-mixing, (k + 1, N):
+        equal numbers per layer in a random order (``run.seed``, stream 2)."""
+        rng = np.random.default_rng([self.scene.run.seed, 2])
+        n_deals = 1 + len(self.remix_times()) if self.layers > 1 else 0
+        if not n_deals:
+            return np.zeros((1, N), int)
+        return np.stack([rng.permutation(np.arange(N) % self.layers) for _ in range(n_deals)])
+
+    def with_options(self, *, times=None, autodiff=None) -> "FluidizedBed":
+        new = super().with_options(times=times, autodiff=autodiff)
+        if times is not None:  # the re-mixings up to the new end
+            new.deals = new.deal(self.deals.shape[1])
+        return new
 
     def model(self, params=None):
-        value = scene_values(self.scene, params)
-        model = make_thermal_model(self.scene, make_particles(self.scene, value), value)
-        return model, initial_temperatures(self.scene, value)
+        """Thermal model (convection with the gas in plug flow) and initial temperatures."""
+        value = assemble.scene_values(self.scene, params)
+        flow = PlugFlow(value("gas.mass_flux"), value("motion.loading"),
+                        assemble.gas_state(self.scene, value).heat_capacity, self.scene.motion.layers)
+        return assemble.thermal_model(self.scene, params, plug_flow=flow)
 
-    def _plug(self, model):
-        return [e for e in model.effects if isinstance(e, PlugFlowConvection)][0]
+    @staticmethod
+    def plug(model) -> PlugFlowConvection:
+        """The plug-flow convection effect of a model."""
+        return model.effect("convection")
 
-    def _with_layers(self, model, layer):
-        return eqx.tree_at(lambda m: self._plug(m).layer, model, jnp.asarray(layer))
+    @staticmethod
+    def with_layers(model, layer):
+        """The model with the particles dealt to the layers ``layer`` (N,)."""
+        return eqx.tree_at(lambda m: m.effect("convection").layer, model, jnp.asarray(layer))
 
-    def _deal(self, N):
-        """Equal numbers per layer in a random order."""
-        return self._rng.permutation(np.arange(N) % self.layers)
-
-    def _grid(self):
-        t_out = np.asarray(self.t_out, float)
+    def remix_times(self) -> np.ndarray:
+        """Times at which the particles are dealt to the layers anew, s (every ``t_R``,
+        strictly before the end)."""
+        t_end = float(self.times[-1])
         if self.layers == 1 or self.t_R is None:
-            return t_out, np.zeros(len(t_out), bool)
-        k = np.arange(1, int(np.floor(t_out[-1] / self.t_R)) + 1) * self.t_R
-        k = k[k < t_out[-1] * (1 - 1e-12)]
-        t = np.union1d(t_out, k)
-        return t, np.isin(t, k)
+            return np.zeros(0)
+        k = np.arange(1, int(np.floor(t_end / self.t_R)) + 1) * self.t_R
+        return k[k < t_end * (1 - 1e-12)]
 
-    def _run(self, params=None, progress=None):
-        from drumheat.motion.static import integrate_network
+    def shared(self) -> dict:
+        return dict(super().shared(), **{"the layers and re-mixing (motion.layers, motion.t_R)":
+                                         (self.layers, self.t_R)})
 
+    def initial_state(self, params=None):
         model, T0 = self.model(params)
-        N = model.particles.diameter.shape[0]
-        layer = np.asarray(self._plug(model).layer) if self.layers == 1 else self._deal(N)
-        model = self._with_layers(model, layer)
-        t_grid, remix = self._grid()
-        y = initial_state(model, T0)
-        states, layers_at = {0.0: y}, {0.0: layer}
-        if model.internal is not None:  # one step plan for the whole run
-            from drumheat.scene import SceneError
-            from drumheat.thermal.integrate import advance_shells
-            from drumheat.thermal.internal import ShellStepError, plan_step
+        if self.layers > 1:
+            model = self.with_layers(model, self.deals[0])
+        return {"model": model, "y": initial_state(model, T0),
+                "deals": jnp.asarray(self.deals)}
 
-            try:
-                scheme, dt = plan_step(model, self.net, y["T"], float(t_grid[-1] - t_grid[0]))
-            except ShellStepError as err:
-                raise SceneError("heat.internal.dt", self.scene.heat.internal.dt, str(err),
-                                 self.scene.name) from None
-            advance = lambda m, y, t0, t1: advance_shells(m, self.net, y, t0, t1, dt, scheme)
-        else:
-            advance = lambda m, y, t0, t1: integrate_network(self.scene, m, self.net, y,
-                                                             np.array([t0, t1]))[-1]
-        for t0, t1, mix in zip(t_grid[:-1], t_grid[1:], remix[1:]):
-            y = advance(model, y, float(t0), float(t1))
-            states[t1], layers_at[t1] = y, layer
-            if progress is not None:
-                progress.update_to(t1)
-            if mix:
-                layer = self._deal(N)
-                model = self._with_layers(model, layer)
-        keep = [states[float(t)] for t in self.t_out]
-        return model, keep, [layers_at[float(t)] for t in self.t_out]
+    def advance(self, state, t0, t1):
+        model, y = state["model"], state["y"]
+        remix = self.remix_times()
+        edges = np.union1d([t0, t1], remix[(remix > t0) & (remix < t1)])
+        for a, b in zip(edges[:-1], edges[1:]):
+            k = int(np.sum(remix <= a))  # re-mixings before this piece
+            if k > 0 and np.any(remix == a):
+                model = self.with_layers(model, state["deals"][k])
+            y = self.solver.advance(model, self.net, y, float(a), float(b))
+        return dict(state, model=model, y=y)
 
-    def solve(self, params=None, progress=None):
-        from drumheat.motion.static import stack_states
-
-        model, states, _ = self._run(params, progress)
-        return stack_states(states, model.accounts, model)
+    def observe(self, state) -> dict:
+        model, y = state["model"], state["y"]
+        row = super().observe(state)
+        plug = self.plug(model)
+        Ts = y["T"] if model.internal is None else y["T"][:, -1]
+        row["T_gas_out"] = _outlet(plug, Ts, model.particles)
+        row["layer"] = plug.layer
+        if model.internal is not None:
+            row["T_surface_mean"] = jnp.mean(y["T"][:, -1])
+            row["T_centre_mean"] = jnp.mean(y["T"][:, 0])
+        return row
 
     def bed_level_model(self, params=None):
         """The exercise's bed-level cooling curve at the output times, K, and its numbers.
@@ -129,13 +148,10 @@ class FluidizedBed:
         ``1/k = 1/alpha_i + 1/alpha_a``, ``A/f = 6 m_1/(d rho_1)``, ``NTU = k (A/f)/(mdot_2
         c_p,2)`` and the closed form ``T1(t)``. Uses the first group (equal spheres).
         """
-        from drumheat.assemble import group_property
-        from drumheat.materials import gas as gas_lib
-
         scene = self.scene
-        value = scene_values(scene, params)
+        value = assemble.scene_values(scene, params)
         model, _ = self.model(params)
-        plug = self._plug(model)
+        plug = self.plug(model)
         conv = plug.convection
         p = model.particles
         d = p.diameter[:1]
@@ -145,51 +161,39 @@ class FluidizedBed:
         if scene.heat.convection.internal_resistance == "transient-sphere":
             k = alpha
         else:
-            lam1 = jnp.asarray(group_property(scene, value, 0, "conductivity"), float)
+            lam1 = jnp.asarray(assemble.group_property(scene, value, 0, "conductivity"), float)
             k = series_with_transient_sphere(alpha, d, lam1, rho_c, value("run.duration"))
-        cp2 = value("gas.heat_capacity") if scene.gas.heat_capacity is not None else gas_lib(
-            scene.gas.material).heat_capacity
+        cp2 = assemble.gas_state(scene, value).heat_capacity
         m1, mdot2 = value("motion.loading"), value("gas.mass_flux")
         A_f = corr.bed_area_per_cross_section(m1, d, rho1)
         ntu = corr.bed_ntu(k, A_f, mdot2, cp2)
         c1 = rho_c / rho1
-        T = corr.batch_bed_mean_temperature(jnp.asarray(self.t_out), value("groups.0.temperature"),
+        T = corr.batch_bed_mean_temperature(jnp.asarray(self.times), value("groups.0.temperature"),
                                             value("gas.temperature"), ntu, m1, c1, mdot2, cp2)
         info = dict(alpha_a=float(alpha[0]) if scene.heat.convection.internal_resistance == "none"
                     else None, k=float(k[0]), A_per_f=float(A_f[0]), NTU=float(ntu[0]))
         return np.asarray(T), info
 
-    def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
-        with SimProgress(self.scene.run.duration, progress) as bar:
-            model, states, layers = self._run(params, bar)
-        from drumheat.motion.static import shell_stored_heat, stack_states
+    def start_log(self, state, params=None):
+        return {"params": params}
 
-        T, Q = stack_states(states, model.accounts, model)
-        plug = self._plug(model)
-        it = model.internal
-        Tout = []
-        for s, lay in zip(states, layers):
-            Ts = s["T"] if it is None else s["T"][:, -1]
-            Tout.append(float(_outlet(eqx.tree_at(lambda q: q.layer, plug, jnp.asarray(lay)),
-                                      Ts, model.particles)))
-        T_bed, info = self.bed_level_model(params)
-        self.bed_level_info = info
-        n_out, N = len(self.t_out), model.particles.diameter.shape[0]
-        extra = {"T_gas_out": np.asarray(Tout), "T_bed_level": T_bed}
-        if it is not None:
-            prof = jnp.stack([s["T"] for s in states])
-            extra["T_surface_mean"] = np.asarray(jnp.mean(prof[:, :, -1], axis=1))
-            extra["T_centre_mean"] = np.asarray(jnp.mean(prof[:, :, 0], axis=1))
+    def finish(self, rows, log, state) -> Trajectory:
+        arrays = self.trajectory_arrays(rows, state)
+        r = self.stack_rows(rows)
+        model = state["model"]
+        T_bed, info = self.bed_level_model(log["params"])
+        n_out, N = len(self.times), model.particles.diameter.shape[0]
+        extra = {"T_gas_out": r["T_gas_out"], "T_bed_level": T_bed}
+        for key in ("T_surface_mean", "T_centre_mean"):
+            if key in r:
+                extra[key] = r[key]
         # positions: height of the particle's layer in a bed at the loosening porosity
         # (H = m_1 / (rho_1 (1 - psi_L)), fluidized-bed-exercise.md section 2), x = z = 0
         rho1 = float(model.particles.mass[0] / (np.pi * model.particles.diameter[0] ** 3 / 6))
         H = self.scene.motion.loading / (rho1 * (1 - self.scene.heat.convection.loosening_porosity))
         pos = np.zeros((n_out, N, 3))
-        pos[:, :, 1] = (np.stack(layers) + 0.5) / self.layers * H
+        pos[:, :, 1] = (r["layer"] + 0.5) / self.layers * H
         return Trajectory(
-            t=self.t_out, T=np.asarray(T), Q={k: np.asarray(v) for k, v in Q.items()},
-            position=pos, diameter=np.asarray(model.particles.diameter),
-            mass=np.asarray(model.particles.mass), capacity=np.asarray(model.particles.capacity),
-            group=group_index(self.scene), n_contacts=np.zeros(n_out),
-            n_wall_contacts=np.zeros(n_out), wall_area=np.zeros(n_out), extra=extra,
-            stored_heat=shell_stored_heat(model, states))
+            **arrays, position=pos, diameter=np.asarray(model.particles.diameter),
+            n_contacts=np.zeros(n_out), n_wall_contacts=np.zeros(n_out),
+            wall_area=np.zeros(n_out), extra=extra, info={"bed_level": info})

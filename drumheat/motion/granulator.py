@@ -43,40 +43,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.assemble import group_index, initial_temperatures, make_particles, scene_values
+from drumheat import assemble
+from drumheat.models.granulator import droplet_speed, path_geometry, wall_heat_per_mass
 from drumheat.models.sphere_conduction import contact_temperature, effusivity
-from drumheat.runner.progress import SimProgress
+from drumheat.motion.base import AbstractMotion, register
+from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal import internal, shells
-from drumheat.thermal.composer import make_thermal_model
+from drumheat.thermal.effect import TableValues
 from drumheat.thermal.network import ContactNetwork
-from drumheat.thermal.radiation import Radiation, granulator_sink_temperature
-from drumheat.motion.trajectory import Trajectory
+from drumheat.thermal.radiation import granulator_sink_temperature
 
 PHASES = ("flight", "wall contact", "fall")
-
-
-def droplet_speed(g) -> float:
-    """``v_S = 0.8 pi d_Dt n_Dt`` in m/s, staltner-slag-particle.md [4.1] (n_Dt in 1/min)."""
-    return 0.8 * math.pi * g.disc_diameter * g.disc_speed / 60.0
-
-
-def wall_heat_per_mass(g) -> float:
-    """``Q_W / m_S`` in J/kg: Q_W [MW] = 0.0036207 m_S[kg/min] - 0.1139 ([4.8], [4.9])."""
-    Q_W = (0.0036207 * g.slag_rate - 0.1139) * 1e6
-    return Q_W / (g.slag_rate / 60.0)
-
-
-def path_geometry(g) -> dict:
-    """Disc height, impact radius, path lengths and the landing point (module docstring)."""
-    a = math.radians(g.alpha4)
-    z_D = g.disc_height if g.disc_height is not None else g.h3 + 0.5 * g.h4
-    r_w = g.r2 - (z_D - g.h3) / math.tan(a)
-    s1 = r_w
-    s3 = z_D / math.sin(2.0 * a)
-    rho_land = r_w + s3 * math.cos(2.0 * a)
-    return dict(z_disc=z_D, r_wall=r_w, s1=s1, s3=s3, rho_land=rho_land,
-                fbk_fraction=(z_D - g.h3) / z_D)
 
 
 @eqx.filter_jit
@@ -104,28 +82,52 @@ def _contact_scan(T, h, n: int, grid, material, boundary, scheme: str):
     return Ts
 
 
-class GranulatorParticle:
+@register
+class GranulatorParticle(AbstractMotion):
     """One droplet through flight, wall contact and fall (module docstring).
 
-    ``solve(params) -> (T (n_out, 1), Q)`` and ``trajectory(params, progress)`` as every
-    motion model. After a run, :attr:`phases` holds the phase table.
+    Not vmappable and not differentiable: the end of Phase 2 is found on the host (the
+    enthalpy-matched contact time, staltner [4.9]) and the output times follow the phase
+    ends, so the run is one host-driven chunk from 0 to ``run.duration`` (an upper bound; the
+    phases end the run). The phase table travels in the trajectory's ``info["phases"]``.
     """
 
-    autodiff = "reverse"
+    name = "granulator"
 
     def __init__(self, scene: Scene):
-        self.scene = scene
+        super().__init__(scene)
+        self.times = np.array([0.0, float(scene.run.duration)])
         self.g = scene.granulator
         self.path = path_geometry(self.g)
         self.v_S = droplet_speed(self.g)
         self.net = ContactNetwork.from_arrays(np.zeros((0, 2)), np.zeros(0))
-        self.phases = None
 
     # -- building blocks ----------------------------------------------------------------
     def model(self, params=None):
-        value = scene_values(self.scene, params)
-        model = make_thermal_model(self.scene, make_particles(self.scene, value), value)
-        return model, initial_temperatures(self.scene, value)
+        """Thermal model and initial temperature: convection at the droplet speed [4.1],
+        radiation to the enclosure seen from the disc (updated along the paths)."""
+        g = TableValues(self.scene.granulator, "granulator", params)
+        sink = None
+        rad = self.scene.heat.radiation
+        if rad is not None and rad.enclosure == "granulator":
+            value = assemble.scene_values(self.scene, params)
+            eps = (rad.emissivity if rad.emissivity is not None
+                   else float(assemble.group_property(self.scene, value, 0, "emissivity")))
+            sink = granulator_sink_temperature(0.0, self.path["z_disc"], self.g, rad.surfaces,
+                                               float(eps))
+        return assemble.thermal_model(self.scene, params, gas_velocity=droplet_speed(g),
+                                      sink_temperature=sink)
+
+    def initial_state(self, params=None):
+        model, T0 = self.model(params)
+        return {"model": model, "T0": T0, "record": None}
+
+    def advance(self, state, t0, t1):
+        """All three phases (module docstring), whatever ``t1``."""
+        return dict(state, record=self._run(state["model"], state["T0"]))
+
+    def observe(self, state) -> dict:
+        return {}  # the record of the phases holds every step
 
     def _positions(self, phase: int, frac):
         """(rho, z) along the Phase-1 or Phase-3 path at path fractions ``frac``."""
@@ -138,37 +140,28 @@ class GranulatorParticle:
     def _sink_temperatures(self, phase: int, model):
         K = self.g.segments
         rho, z = self._positions(phase, (np.arange(K) + 0.5) / K)
-        rad = [e for e in model.effects if isinstance(e, Radiation)]
-        if not rad or self.scene.heat.radiation.enclosure != "granulator":
+        rad = model.effect("radiation")
+        if rad is None or self.scene.heat.radiation.enclosure != "granulator":
             return None
-        eps = float(rad[0].emissivity[0])
+        eps = float(rad.emissivity[0])
         return np.asarray(granulator_sink_temperature(rho, z, self.g,
                                                       self.scene.heat.radiation.surfaces, eps))
 
-    def _step_size(self, model, T, duration, scheme_dt=None):
-        it = model.internal
-        n = self.g.steps_per_phase
-        dt = it.dt if it.dt is not None else duration / n
-        scheme = it.scheme
-        if scheme == "explicit":
-            limit = float(internal.stability_limit(model, self.net, T)[0])
-            if dt > limit:
-                msg = (f"explicit shell step dt = {dt:.4g} s exceeds the stability limit "
-                       f"{limit:.4g} s at the start of a granulator phase (staltner digest "
-                       "section 4)")
-                if it.on_unstable == "refuse":
-                    raise SceneError("heat.internal.dt", it.dt, msg + "; lower heat.internal.dt "
-                                     "or use heat.internal.on_unstable = 'implicit'",
-                                     self.scene.name)
-                import warnings
-
-                warnings.warn(msg + "; switching to the implicit scheme", UserWarning)
-                scheme = "implicit"
+    def _step_size(self, model, T, duration):
+        """Shell step and scheme of a flight phase: ``heat.internal.dt`` or the phase in
+        ``granulator.steps_per_phase`` steps, the explicit limit checked at the phase's start
+        (:func:`drumheat.thermal.internal.plan_step`)."""
+        try:
+            scheme, dt = internal.plan_step(model, self.net, T, duration,
+                                            default_dt=duration / self.g.steps_per_phase)
+        except internal.ShellStepError as err:
+            raise SceneError("heat.internal.dt", model.internal.dt, f"{err} (at the start of a "
+                             "granulator phase; or use heat.internal.on_unstable = "
+                             "'implicit')", self.scene.name) from None
         return dt, scheme
 
     # -- the run --------------------------------------------------------------------------
-    def _run(self, params=None, progress=None):
-        model, T0 = self.model(params)
+    def _run(self, model, T0):
         it = model.internal
         grid, mat = it.grid, it.material
         accounts = tuple(sorted(set(model.accounts) | {"wall"}))
@@ -205,8 +198,7 @@ class GranulatorParticle:
                 for k in range(K):
                     m = model
                     if T_rad is not None:
-                        m = eqx.tree_at(lambda mm: [e for e in mm.effects
-                                                    if isinstance(e, Radiation)][0].sink_temperature,
+                        m = eqx.tree_at(lambda mm: mm.effect("radiation").sink_temperature,
                                         model, jnp.full(1, T_rad[k]))
                     Ts, dQ = _effect_scan(m, self.net, T, jnp.asarray(h), n_seg, scheme)
                     Ts = np.asarray(Ts)
@@ -221,16 +213,14 @@ class GranulatorParticle:
                         Q[a] += float(dQ[a][-1])
                     T = jnp.asarray(Ts[-1])
                     t += n_seg * h
-                    if progress is not None:
-                        progress.update_to(min(t, self.scene.run.duration))
             else:
                 T, t = self._contact_phase(model, T, t, Q, accounts, rec_t, rec_T, rec_phase,
                                            rec_Q, rec_Trad, H)
             record_phase(phase, t_start, T)
-        self.phases = table
         rec = dict(t=np.asarray(rec_t), T=np.stack(rec_T), phase=np.asarray(rec_phase),
                    Q={a: np.asarray([q[a] for q in rec_Q]) for a in accounts},
-                   T_rad=np.asarray(rec_Trad), model=model, mass=mass, volume=V)
+                   T_rad=np.asarray(rec_Trad), model=model, mass=mass, volume=V, phases=table,
+                   contact_temperature=self._T_m)
         return rec
 
     def _contact_phase(self, model, T, t, Q, accounts, rec_t, rec_T, rec_phase, rec_Q,
@@ -242,7 +232,7 @@ class GranulatorParticle:
         b_S = effusivity(mat.conductivity(Ts0), mat.heat_capacity(Ts0), rho)
         b_W = effusivity(g.wall_conductivity, g.wall_heat_capacity, g.wall_density)
         T_m = contact_temperature(Ts0, b_S, g.wall_temperature, b_W)
-        self.contact_temperature = float(T_m[0])
+        self._T_m = float(T_m[0])
         dh = wall_heat_per_mass(g)
         mV = float(jnp.sum(shells._col(mat.density, T) * grid.volume))
         H_start = H(T)
@@ -299,18 +289,11 @@ class GranulatorParticle:
         raise SceneError("granulator.slag_rate", g.slag_rate, "no enthalpy crossing found in "
                          "Phase 2 within 200 chunks; check the inputs", self.scene.name)
 
-    # -- motion-model interface --------------------------------------------------------------
-    def solve(self, params=None, progress=None):
-        """Mean temperatures (n_out, 1) at every recorded step and heat per account (values
-        only; the enthalpy-matched contact time is found on the host, so no gradients)."""
-        rec = self._run(params, progress)
-        T = rec["model"].internal.mean_temperature(jnp.asarray(rec["T"]))
-        return T, {a: jnp.asarray(v) for a, v in rec["Q"].items()}
-
-    def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
-        with SimProgress(self.scene.run.duration, progress) as bar:
-            rec = self._run(params, bar)
+    # -- the result -------------------------------------------------------------------------
+    def finish(self, rows, log, state) -> Trajectory:
+        rec = state["record"]
         model, it = rec["model"], rec["model"].internal
+        phases = rec["phases"]
         keep = self._output_indices(rec["t"], rec["phase"])
         t = rec["t"][keep]
         prof = rec["T"][keep]
@@ -318,9 +301,9 @@ class GranulatorParticle:
         H = np.asarray(jax.vmap(lambda x: jnp.sum(it.stored_heat(x)))(jnp.asarray(prof)))
         pos = np.zeros((len(t), 1, 3))
         frac = np.zeros(len(t))
-        for ph, dur_key in ((1, "s1"), (3, "s3")):
+        for ph in (1, 3):
             m = rec["phase"][keep] == ph
-            row = self.phases[ph - 1]
+            row = phases[ph - 1]
             frac[m] = (t[m] - row["t_start_s"]) / row["duration_s"]
             rho, z = self._positions(ph, frac[m])
             pos[m, 0, 0], pos[m, 0, 1] = rho, z
@@ -332,7 +315,7 @@ class GranulatorParticle:
                  "T_volume_mean": np.asarray(it.volume_mean_temperature(jnp.asarray(prof)))[:, 0],
                  "T_rad": rec["T_rad"][keep]}
         r = np.asarray(it.grid.r[0])
-        all_t, all_T, phases = rec["t"], rec["T"][:, 0, :], self.phases
+        all_t, all_T = rec["t"], rec["T"][:, 0, :]
         files = {"phases.csv": lambda p: _write_phases(p, phases),
                  "profiles.npz": lambda p: np.savez_compressed(p, t=all_t, r=r, T=all_T,
                                                                phase=rec["phase"]),
@@ -342,9 +325,11 @@ class GranulatorParticle:
         return Trajectory(
             t=t, T=T, Q={a: v[keep] for a, v in rec["Q"].items()}, position=pos, diameter=d,
             mass=np.asarray(model.particles.mass), capacity=np.asarray(model.particles.capacity),
-            group=group_index(self.scene), n_contacts=np.zeros(n_out),
+            group=assemble.group_index(self.scene), n_contacts=np.zeros(n_out),
             n_wall_contacts=m2.astype(float), wall_area=np.zeros(n_out), extra=extra,
-            stored_heat=H - H[0], files=files)
+            stored_heat=H - H[0], files=files,
+            info={"phases": phases, "contact_temperature_K": rec["contact_temperature"]},
+            records={"t": all_t, "T": rec["T"], "phase": rec["phase"], "Q": rec["Q"]})
 
     def _output_indices(self, t, phase):
         """Recorded steps kept as outputs: one per output interval plus every phase end."""

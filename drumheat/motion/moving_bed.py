@@ -48,79 +48,24 @@ time-series columns and over a window by :meth:`MovingBed.measure`):
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.assemble import group_index, group_property, output_times, scene_values
-from drumheat.geometry.walls import FixedCylinder, Plane, Segment
+from drumheat import assemble
+from drumheat.geometry.hopper import HopperGeometry, hopper_walls  # noqa: F401 (re-exported)
+from drumheat.geometry.walls import Plane
 from drumheat.mechanics import DEMError, make_dem
-from drumheat.mechanics import make_particles as mechanical_particles
-from drumheat.motion.dem import (_reset_record, initial_extra, make_thermal_update,
-                                 scene_contact_params)
 from drumheat.models.moving_bed import BETA_HOPPER, lmtd
-from drumheat.runner.progress import SimProgress
-from drumheat.scene import Scene, SceneError
-from drumheat.thermal.composer import ThermalModel, make_thermal_model
-from drumheat.assemble import make_particles as thermal_particles
-from drumheat.thermal.network import ContactNetwork
-from drumheat.thermal.wall import WallConduction
+from drumheat.motion.base import AbstractMotion, register
+from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_count,
+                                      reset_record)
 from drumheat.motion.trajectory import Trajectory
+from drumheat.scene import Scene, SceneError
 
-__all__ = ["HopperGeometry", "hopper_walls", "particles_to_fill", "MovingBed"]
-
-
-class HopperGeometry(NamedTuple):
-    """The walls of the hopper slice and what the measurements need (SI, see module docstring).
-
-    walls: tuple of primitives (side planes, bottom plates, tubes), in wall-index order;
-    tube_index: wall index of every tube; tube_center (n_tubes, 2) m; tube_fraction: 1 for a
-    full tube, 0.5 for a half tube centred on a side wall; half_width m; slit_width m;
-    bundle_lo / bundle_hi: y of the lowest / highest tube centre, m; crest: y of the top of the
-    highest tubes, m.
-    """
-
-    walls: tuple
-    tube_index: np.ndarray
-    tube_center: np.ndarray
-    tube_fraction: np.ndarray
-    half_width: float
-    slit_width: float
-    bundle_lo: float
-    bundle_hi: float
-    crest: float
-
-
-def hopper_walls(h) -> HopperGeometry:
-    """Walls of a ``[hopper]`` table (:class:`drumheat.scene.HopperConfig`)."""
-    xw = 0.5 * h.columns * h.pitch
-    S = h.slit_width
-    R = 0.5 * h.tube_diameter
-    walls = [Plane((-xw, 0.0, 0.0), (1.0, 0.0, 0.0), wall_id=0),
-             Plane((xw, 0.0, 0.0), (-1.0, 0.0, 0.0), wall_id=1),
-             Segment((-xw, h.bottom_height), (-0.5 * S, 0.0), wall_id=2),
-             Segment((xw, h.bottom_height), (0.5 * S, 0.0), wall_id=3)]
-    y0 = h.bottom_height + h.bundle_clearance + R
-    centers, frac = [], []
-    tol = 1e-9
-    for k in range(h.rows):
-        offset = 0.5 * h.pitch if k % 2 == 0 else 0.0
-        m = int(math.ceil(xw / h.pitch)) + 1
-        for i in range(-m, m + 1):
-            x = offset + i * h.pitch
-            if abs(x) <= xw + tol:
-                centers.append((x, y0 + k * h.row_pitch))
-                frac.append(0.5 if abs(abs(x) - xw) <= tol else 1.0)
-    tubes = [FixedCylinder(tuple(c), R, temperature=h.tube_temperature, wall_id=4 + k)
-             for k, c in enumerate(centers)]
-    centers = np.array(centers)
-    return HopperGeometry(
-        walls=tuple(walls + tubes), tube_index=np.arange(4, 4 + len(tubes)),
-        tube_center=centers, tube_fraction=np.array(frac), half_width=xw, slit_width=S,
-        bundle_lo=float(y0), bundle_hi=float(y0 + (h.rows - 1) * h.row_pitch),
-        crest=float(y0 + (h.rows - 1) * h.row_pitch + R))
+__all__ = ["HopperGeometry", "hopper_walls", "particles_to_fill", "MovingBed", "measure"]
 
 
 def _lattice(x_lo, x_hi, y_lo, y_hi, depth, spacing):
@@ -133,9 +78,15 @@ def _lattice(x_lo, x_hi, y_lo, y_hi, depth, spacing):
     return g
 
 
-class MovingBed:
+@register
+class MovingBed(AbstractMotion):
     """A moving bed discharging through a slit from a hopper with a tube bundle (module
     docstring); DEM and heat in one scan, particles recycled from the slit to the top.
+
+    The flow counters at the output times travel in the trajectory's ``records`` (``n_out``,
+    ``m_out``, ``H_out``, ``C_out``, ``v_axis``, ``n_axis``, ``v_bundle``, ``n_bundle``,
+    ``steps``, ``waiting``, ``Q_tubes``, ``max_overlap``, ``passes``); :func:`measure` averages
+    them over a window.
 
     Parameters
     ----------
@@ -143,30 +94,23 @@ class MovingBed:
         Needs ``[hopper]`` and ``[dem]``, ``dim = 3``.
     """
 
+    name = "moving_bed"
     INSERT_LAYERS = 5
 
     def __init__(self, scene: Scene):
-        if scene.hopper is None or scene.dem is None:
-            raise SceneError("hopper", None, "motion model 'moving_bed' needs [hopper] and "
-                             "[dem]", scene.name)
-        self.scene = scene
+        super().__init__(scene)
         h = self.hopper = scene.hopper
-        cfg = scene.dem
-        value = scene_values(scene)
-        self.group = group_index(scene)
-        self.diameter = np.concatenate([np.full(g.count, g.diameter) for g in scene.groups])
+        self.setup = setup = assemble.dem_setup(scene)
+        self.group = assemble.group_index(scene)
+        self.diameter = assemble.diameters(scene)
         self.n = len(self.diameter)
-        density = np.array([float(group_property(scene, value, k, "density"))
-                            for k in range(len(scene.groups))])
-        self.density = density[self.group]
-        self.geometry = hopper_walls(h)
+        self.density = setup.density
+        self.geometry = assemble.hopper_geometry(scene)
         self.walls = self.geometry.walls
         self.n_walls = len(self.walls)
         self.wall_heated = np.array([w.temperature is not None for w in self.walls])
-        self.params, self.k_n = scene_contact_params(scene, self.diameter)
-        self.mech = mechanical_particles(0.5 * self.diameter, self.density, group=self.group)
-        self.gravity = np.array([0.0, -cfg.gravity, 0.0])
-        self.dtype = jnp.float32 if cfg.precision == "float32" else jnp.float64
+        self.params, self.k_n, self.mech = setup.params, setup.k_n, setup.particles
+        self.gravity, self.dtype, self.t_crit = setup.gravity, setup.dtype, setup.t_crit
         d_max = float(self.diameter.max())
         self.d_max = d_max
         xw = self.geometry.half_width
@@ -178,35 +122,26 @@ class MovingBed:
         self.y_exit = -h.exit_depth
         self.bounds = (np.array([-xw, self.y_exit - 0.1, 0.0]),
                        np.array([xw, float(self.sites[:, 1].max()) + 0.05, h.depth]))
-        self.t_out = output_times(scene)
-        probe = make_dem(self.mech, self.walls, self.params, dim=3, dt=cfg.dt,
-                         safety_factor=cfg.safety_factor, gravity=self.gravity,
-                         periodic_length=h.depth, bounds=self.bounds, skin=cfg.skin,
-                         dtype=self.dtype)
-        self.t_crit = probe.t_crit
-        out_iv = scene.run.output_interval
-        self.steps_per_output = math.ceil(out_iv / probe.dt - 1e-9)
-        self.dt = out_iv / self.steps_per_output
-        self.substeps = cfg.thermal_substeps
+        self.dt, self.steps_per_output = assemble.fit_time_step(setup.dt,
+                                                                scene.run.output_interval)
+        self.substeps = scene.dem.thermal_substeps
         # measurement regions
         self.axis_half = 0.5 * h.pitch
         self.tube_area = (self.geometry.tube_fraction * math.pi * h.tube_diameter * h.depth)
         self._packing = None
-        # no fixed contact network (contacts come from the DEM); for the effect advisor
-        self.net = ContactNetwork.from_arrays(np.zeros((0, 2)), np.zeros(0))
+        model, _ = self.model()
+        self._skeleton = eqx.partition(model, eqx.is_array)[1]
+        self.dem = self.make_dem(model)
 
     # -- set-up ---------------------------------------------------------------------------------
     def model(self, params=None):
-        """Thermal model (one wall temperature per primitive) and initial temperatures.
-
-        The particles start at the inlet temperature (the bed is filled with fresh solids).
-        """
-        value = scene_values(self.scene, params)
-        model = make_thermal_model(self.scene, thermal_particles(self.scene, value), value)
+        """Thermal model (one wall temperature per primitive, the tube temperature where the
+        primitive is heated) and initial temperatures: the particles start at the inlet
+        temperature (the bed is filled with fresh solids)."""
+        value = assemble.scene_values(self.scene, params)
         Tw = jnp.where(jnp.asarray(self.wall_heated),
                        jnp.asarray(value("hopper.tube_temperature"), float), 0.0)
-        effects = tuple(eqx_replace_wall(e, Tw) for e in model.effects)
-        model = ThermalModel(particles=model.particles, effects=effects, internal=model.internal)
+        model, _ = assemble.thermal_model(self.scene, params, wall_temperatures=Tw)
         T0 = jnp.full(self.n, jnp.asarray(value("hopper.inlet_temperature"), float))
         return model, T0
 
@@ -263,16 +198,17 @@ class MovingBed:
         return pos
 
     # -- the open boundary ----------------------------------------------------------------------
-    def make_boundary(self, model: ThermalModel):
+    def make_boundary(self):
         """``boundary_update`` hook: recycling from the slit to the insertion band, and the
-        flow measurements (module docstring)."""
+        flow measurements (module docstring). The heat capacities come from the thermal
+        model in the state."""
         sites = jnp.asarray(self.sites, self.dtype)
         K = len(self.sites)
         L = self.hopper.depth
         y_exit = self.y_exit
         radius = jnp.asarray(0.5 * self.diameter, self.dtype)
         mass = jnp.asarray(self.mech.mass, float)
-        cap = model.particles.capacity
+        skeleton = self._skeleton
         T_in = jnp.asarray(self.hopper.inlet_temperature, float)
         clear = 0.55 * self.d_max  # centre distance > r_other + 1.1 r_new: no overlap
         ax = self.axis_half
@@ -302,6 +238,7 @@ class MovingBed:
             w = jnp.where(ok[:, None], 0.0, state.angular_velocity)
             ws = jnp.where(ok[:, None, None], 0.0, state.wall_spring)
             T_old = ex["T"]
+            cap = eqx.combine(ex["model"], skeleton).particles.capacity
             T = jnp.where(ok, T_in, T_old)
             okf = ok.astype(float)
             flow = dict(ex["flow"])
@@ -348,144 +285,155 @@ class MovingBed:
                 "turn": jnp.asarray(0, jnp.int32), "m_out": z, "H_out": z, "C_out": z,
                 "v_axis": z, "n_axis": z, "v_bundle": z, "n_bundle": z, "steps": z}
 
-    def make_dem(self, model: ThermalModel):
+    def make_dem(self, model):
         """The DEM system with the coupled thermal update and the recycling boundary."""
         update = make_thermal_update(model, self.n, self.n_walls, self.wall_heated,
                                      self.substeps, self.dt, per_wall=True)
         return make_dem(self.mech, self.walls, self.params, dim=3, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.hopper.depth,
                         bounds=self.bounds, skin=self.scene.dem.skin, dtype=self.dtype,
-                        extra_update=update, boundary_update=self.make_boundary(model),
+                        extra_update=update, boundary_update=self.make_boundary(),
                         chunk=self.steps_per_output)
 
-    # -- running --------------------------------------------------------------------------------
-    def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
-        """Run mechanics, heat and recycling together; collect outputs and flow records."""
+    # -- the loop -------------------------------------------------------------------------------
+    def initial_state(self, params=None):
         model, T0 = self.model(params)
-        dem = self.make_dem(model)
-        pos0 = self.packing_positions()
-        state = dem.init(pos0)
+        state = self.dem.init(self.packing_positions())
         cap = state.nbrs.idx.shape[1]
         extra = initial_extra(model, T0, cap, self.n, self.n_walls, per_wall=True,
                               accounts=("inflow",))
         extra["flow"] = self.initial_flow()
-        state = state._replace(extra=extra)
-        rec = {k: [0.0] for k in ("n_out", "m_out", "H_out", "C_out", "v_axis", "n_axis",
-                                  "v_bundle", "n_bundle", "steps", "waiting")}
-        out = dict(T=[np.asarray(T0)], pos=[np.asarray(pos0)],
-                   Q={a: [0.0] for a in extra["Q"]},
-                   Q_tubes=[np.zeros(len(self.geometry.tube_index))], overlap=[0.0],
-                   n_pairs=[], n_wall=[])
-        with SimProgress(self.scene.run.duration, progress) as bar:
-            for t_end in self.t_out[1:]:
-                state = state._replace(extra=_reset_record(state.extra))
-                try:
-                    state = dem.run(state, self.steps_per_output, chunk=self.steps_per_output)
-                except DEMError as err:
-                    raise DEMError(f"{err} (scene {self.scene.name!r})", err.state) from None
-                ex = jax.device_get(state.extra)
-                out["T"].append(np.asarray(ex["T"]))
-                out["pos"].append(np.asarray(state.position))
-                for a in extra["Q"]:
-                    out["Q"][a].append(float(ex["Q"][a]))
-                out["Q_tubes"].append(np.asarray(ex["Q_walls"])[self.geometry.tube_index])
-                for k in rec:
-                    rec[k].append(float(ex["flow"][k]))
-                self.passes = np.asarray(ex["flow"]["passes"])
-                out["overlap"].append(float(state.max_overlap))
-                span = self.steps_per_output * self.dt
-                out["n_pairs"].append(float(np.sum(ex["pair_data"]["rec_time"])) / span)
-                out["n_wall"].append(float(np.sum(np.asarray(ex["rec_wall_time"]).reshape(
-                    self.n, self.n_walls)[:, self.wall_heated])) / span)
-                bar.update_to(t_end)
-        self.records = {k: np.array(v) for k, v in rec.items()}
-        self.records["Q_tubes"] = np.stack(out["Q_tubes"])
-        self.records["max_overlap"] = np.array(out["overlap"])
-        self.t_crit_ratio = self.dt / self.t_crit
-        positions = np.stack(out["pos"])
-        ts = self._interval_columns(np.asarray(self.t_out), model)
-        for k, c in enumerate(self.geometry.tube_index):
-            ts[f"Q_tube:{k}"] = self.records["Q_tubes"][:, k]
+        return state._replace(extra=extra)
+
+    def advance(self, state, t0, t1):
+        start = state._replace(extra=reset_count(reset_record(state.extra)),
+                               max_overlap=jnp.zeros_like(state.max_overlap))
+        return self.dem.run_steps(start, int(round((t1 - t0) / self.dt)))
+
+    def check(self, start, end, attempt=0):
+        try:
+            return self.dem.check_chunk(start, end, attempt)
+        except DEMError as err:
+            raise DEMError(f"{err} (scene {self.scene.name!r})", err.state) from None
+
+    def observe(self, state) -> dict:
+        ex = state.extra
+        span = self.steps_per_output * self.dt
+        return {"T": ex["T"], "Q": ex["Q"], "position": state.position,
+                "Q_tubes": ex["Q_walls"][self.geometry.tube_index],
+                "flow": {k: ex["flow"][k] for k in FLOW_RECORDS},
+                "max_overlap": state.max_overlap,
+                "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span}
+
+    def finish(self, rows, log, state) -> Trajectory:
+        r = self.stack_rows(rows)
+        records = {k: np.asarray(v, float) for k, v in r["flow"].items()}
+        records["Q_tubes"] = r["Q_tubes"]
+        records["max_overlap"] = r["max_overlap"]
+        records["passes"] = np.asarray(state.extra["flow"]["passes"])
+        t = np.asarray(self.times)
+        info = self.constants()
+        ts = interval_columns(t, records, info)
+        for k in range(len(self.geometry.tube_index)):
+            ts[f"Q_tube:{k}"] = records["Q_tubes"][:, k]
+        particles = eqx.combine(state.extra["model"], self._skeleton).particles
+        n_pairs, n_wall = r["n_pairs"], r["n_wall"]
         return Trajectory(
-            t=self.t_out, T=np.stack(out["T"]), Q={a: np.array(v) for a, v in out["Q"].items()},
-            position=positions, diameter=self.diameter,
-            mass=np.asarray(model.particles.mass), capacity=np.asarray(model.particles.capacity),
-            group=self.group, n_contacts=np.array(out["n_pairs"][:1] + out["n_pairs"]),
-            n_wall_contacts=np.array(out["n_wall"][:1] + out["n_wall"]),
-            wall_area=np.zeros(len(self.t_out)),
-            extra=ts)
+            t=t, T=r["T"], Q=r["Q"], position=r["position"], diameter=self.diameter,
+            mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),
+            group=self.group, n_contacts=np.concatenate([n_pairs[1:2], n_pairs[1:]]),
+            n_wall_contacts=np.concatenate([n_wall[1:2], n_wall[1:]]),
+            wall_area=np.zeros(len(t)), extra=ts, records=records, info={"moving_bed": info})
 
-    # -- measurements ---------------------------------------------------------------------------
-    def _rates(self, i0, i1, model=None) -> dict:
-        """Flow and heat measurements between output indices i0 < i1 (module docstring)."""
-        r = self.records
+    def constants(self) -> dict:
+        """What :func:`measure` needs besides the records (JSON-serialisable)."""
         h = self.hopper
-        t = np.asarray(self.t_out)
-        span = t[i1] - t[i0]
-        diff = lambda k: r[k][i1] - r[k][i0]  # noqa: E731
-        rho = float(np.average(self.density))
-        m_dot = diff("m_out") / span  # kg/s through the slice's slit
-        n_ax = diff("n_axis")
-        W_axis = diff("v_axis") / n_ax if n_ax > 0 else float("nan")
-        n_b = diff("n_bundle")
-        W_bundle = diff("v_bundle") / n_b if n_b > 0 else float("nan")
-        W_slit = m_dot / (rho * BETA_HOPPER * h.depth * h.slit_width)
-        Q_tubes = float(np.sum(r["Q_tubes"][i1] - r["Q_tubes"][i0])) / span  # W
-        A = float(np.sum(self.tube_area))
-        C = diff("C_out")
-        t1 = h.inlet_temperature
-        tR = h.tube_temperature
-        t2 = diff("H_out") / C if C > 0 else float("nan")
-        Q_M1 = C * (t2 - t1) / span if C > 0 else float("nan")  # m c (t2 - t1), W
-        dt_ln = float(lmtd(tR - t1, tR - t2)) if C > 0 else float("nan")
-        return dict(t_start=float(t[i0]), t_end=float(t[i1]), mass_flow=m_dot,
-                    mass_flow_per_m=m_dot / h.depth, n_discharged=int(diff("n_out")),
-                    W_p_axis=W_axis, W_p_bundle=W_bundle, W_p_slit=W_slit, Q_tubes=Q_tubes,
-                    Q_M1=Q_M1, T_out=t2, dt_ln=dt_ln, tube_area=A,
-                    alpha_1=Q_tubes / (A * dt_ln) if C > 0 else float("nan"),
-                    alpha_1_solids=Q_M1 / (A * dt_ln) if C > 0 else float("nan"))
+        return dict(depth=h.depth, slit_width=h.slit_width, inlet_temperature=h.inlet_temperature,
+                    tube_temperature=h.tube_temperature, measure_from=h.measure_from,
+                    density=float(np.average(self.density)),
+                    tube_area=float(np.sum(self.tube_area)), dt=self.dt,
+                    dt_over_tcrit=self.dt / self.t_crit)
 
-    def _interval_columns(self, t, model) -> dict:
-        cols = {k: [np.nan] for k in ("W_p_axis", "W_p_slit", "mass_flow", "T_out", "Q_dot_tubes",
-                                      "alpha_1")}
-        for i in range(1, len(t)):
-            m = self._rates(i - 1, i)
-            cols["W_p_axis"].append(m["W_p_axis"])
-            cols["W_p_slit"].append(m["W_p_slit"])
-            cols["mass_flow"].append(m["mass_flow"])
-            cols["T_out"].append(m["T_out"])
-            cols["Q_dot_tubes"].append(m["Q_tubes"])
-            cols["alpha_1"].append(m["alpha_1"])
-        cols = {k: np.array(v) for k, v in cols.items()}
-        cols["n_discharged"] = self.records["n_out"]
-        return cols
 
-    def measure(self, t_from: float | None = None) -> dict:
-        """Window averages from ``t_from`` (default ``hopper.measure_from``) to the end of the
-        run, plus a steadiness check: the same quantities over the two halves of the window.
-        Call after :meth:`trajectory`."""
-        t = np.asarray(self.t_out)
-        t_from = self.hopper.measure_from if t_from is None else t_from
-        i0 = int(np.searchsorted(t, t_from - 1e-9))
-        i1 = len(t) - 1
-        if i0 >= i1:
-            raise ValueError(f"measurement window starts at {t_from} s, after the run's end")
-        res = self._rates(i0, i1)
-        im = (i0 + i1) // 2
-        if im > i0:
-            a, b = self._rates(i0, im), self._rates(im, i1)
-            res["first_half"] = {k: a[k] for k in ("W_p_axis", "W_p_slit", "alpha_1", "Q_tubes")}
-            res["second_half"] = {k: b[k] for k in ("W_p_axis", "W_p_slit", "alpha_1",
-                                                    "Q_tubes")}
-        res["max_overlap"] = float(np.max(self.records["max_overlap"]))
-        res["waiting_steps"] = int(self.records["waiting"][-1])
-        # mean number of particles waiting below the slit for a free insertion site
-        res["mean_waiting"] = float((self.records["waiting"][i1] - self.records["waiting"][i0])
-                                    / max(self.records["steps"][i1] - self.records["steps"][i0],
-                                          1.0))
-        res["dt"] = self.dt
-        res["dt_over_tcrit"] = self.dt / self.t_crit
-        return res
+#: the flow counters of the boundary hook recorded at every output time
+FLOW_RECORDS = ("n_out", "m_out", "H_out", "C_out", "v_axis", "n_axis", "v_bundle", "n_bundle",
+                "steps", "waiting")
+
+
+def rates(t, records: dict, info: dict, i0: int, i1: int) -> dict:
+    """Flow and heat measurements between output indices i0 < i1 (module docstring)."""
+    r = records
+    span = t[i1] - t[i0]
+    diff = lambda k: r[k][i1] - r[k][i0]  # noqa: E731
+    rho = info["density"]
+    m_dot = diff("m_out") / span  # kg/s through the slice's slit
+    n_ax = diff("n_axis")
+    W_axis = diff("v_axis") / n_ax if n_ax > 0 else float("nan")
+    n_b = diff("n_bundle")
+    W_bundle = diff("v_bundle") / n_b if n_b > 0 else float("nan")
+    W_slit = m_dot / (rho * BETA_HOPPER * info["depth"] * info["slit_width"])
+    Q_tubes = float(np.sum(r["Q_tubes"][i1] - r["Q_tubes"][i0])) / span  # W
+    A = info["tube_area"]
+    C = diff("C_out")
+    t1 = info["inlet_temperature"]
+    tR = info["tube_temperature"]
+    t2 = diff("H_out") / C if C > 0 else float("nan")
+    Q_M1 = C * (t2 - t1) / span if C > 0 else float("nan")  # m c (t2 - t1), W
+    dt_ln = float(lmtd(tR - t1, tR - t2)) if C > 0 else float("nan")
+    return dict(t_start=float(t[i0]), t_end=float(t[i1]), mass_flow=m_dot,
+                mass_flow_per_m=m_dot / info["depth"], n_discharged=int(diff("n_out")),
+                W_p_axis=W_axis, W_p_bundle=W_bundle, W_p_slit=W_slit, Q_tubes=Q_tubes,
+                Q_M1=Q_M1, T_out=t2, dt_ln=dt_ln, tube_area=A,
+                alpha_1=Q_tubes / (A * dt_ln) if C > 0 else float("nan"),
+                alpha_1_solids=Q_M1 / (A * dt_ln) if C > 0 else float("nan"))
+
+
+def interval_columns(t, records: dict, info: dict) -> dict:
+    """Time-series columns of the flow measurements over each output interval."""
+    cols = {k: [np.nan] for k in ("W_p_axis", "W_p_slit", "mass_flow", "T_out", "Q_dot_tubes",
+                                  "alpha_1")}
+    for i in range(1, len(t)):
+        m = rates(t, records, info, i - 1, i)
+        cols["W_p_axis"].append(m["W_p_axis"])
+        cols["W_p_slit"].append(m["W_p_slit"])
+        cols["mass_flow"].append(m["mass_flow"])
+        cols["T_out"].append(m["T_out"])
+        cols["Q_dot_tubes"].append(m["Q_tubes"])
+        cols["alpha_1"].append(m["alpha_1"])
+    cols = {k: np.array(v) for k, v in cols.items()}
+    cols["n_discharged"] = records["n_out"]
+    return cols
+
+
+def measure(result, t_from: float | None = None) -> dict:
+    """Window averages of a moving-bed run from ``t_from`` (default ``hopper.measure_from``) to
+    its end, plus a steadiness check: the same quantities over the two halves of the window.
+
+    ``result`` is the :class:`~drumheat.Result` (or :class:`Trajectory`) of a ``moving_bed``
+    run.
+    """
+    traj = getattr(result, "trajectory", result)
+    info, r = traj.info["moving_bed"], traj.records
+    t = np.asarray(traj.t)
+    t_from = info["measure_from"] if t_from is None else t_from
+    i0 = int(np.searchsorted(t, t_from - 1e-9))
+    i1 = len(t) - 1
+    if i0 >= i1:
+        raise ValueError(f"measurement window starts at {t_from} s, after the run's end")
+    res = rates(t, r, info, i0, i1)
+    im = (i0 + i1) // 2
+    if im > i0:
+        a, b = rates(t, r, info, i0, im), rates(t, r, info, im, i1)
+        res["first_half"] = {k: a[k] for k in ("W_p_axis", "W_p_slit", "alpha_1", "Q_tubes")}
+        res["second_half"] = {k: b[k] for k in ("W_p_axis", "W_p_slit", "alpha_1", "Q_tubes")}
+    res["max_overlap"] = float(np.max(r["max_overlap"]))
+    res["waiting_steps"] = int(r["waiting"][-1])
+    # mean number of particles waiting below the slit for a free insertion site
+    res["mean_waiting"] = float((r["waiting"][i1] - r["waiting"][i0])
+                                / max(r["steps"][i1] - r["steps"][i0], 1.0))
+    res["dt"] = info["dt"]
+    res["dt_over_tcrit"] = info["dt_over_tcrit"]
+    return res
 
 
 def particles_to_fill(h, diameter: float, level: float, solids_fraction: float = BETA_HOPPER
@@ -498,10 +446,3 @@ def particles_to_fill(h, diameter: float, level: float, solids_fraction: float =
     free = 2 * xw * y_top - (xw - 0.5 * h.slit_width) * h.bottom_height
     free -= float(np.sum(g.tube_fraction)) * math.pi * h.tube_diameter**2 / 4
     return int(round(free * h.depth * solids_fraction / (math.pi * diameter**3 / 6)))
-
-
-def eqx_replace_wall(effect, wall_temperature):
-    """The wall effect with one temperature per wall primitive; other effects unchanged."""
-    if isinstance(effect, WallConduction):
-        return WallConduction(alpha=effect.alpha, wall_temperature=wall_temperature)
-    return effect

@@ -80,19 +80,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.assemble import group_index, group_property, make_particles, output_times, scene_values
-from drumheat.geometry.walls import Plane
+from drumheat import assemble
 from drumheat.materials import gas as gas_lib
-from drumheat.mechanics import make_dem
-from drumheat.mechanics import make_particles as mechanical_particles
-from drumheat.motion.dem import scene_contact_params
+from drumheat.mechanics import DEMError, make_dem
 from drumheat.models import drag as drag_model
 from drumheat.models import moving_bed
-from drumheat.runner.progress import SimProgress
-from drumheat.scene import Scene, SceneError
+from drumheat.motion.base import AbstractMotion, register
+from drumheat.motion.trajectory import Trajectory
+from drumheat.scene import Scene
 from drumheat.thermal.convection import (_air_clipped, nusselt_alpha,
                                          series_with_transient_sphere)
-from drumheat.motion.trajectory import Trajectory
 
 #: Gas volume per metre of apparatus of the channel part, V_KAM2 (kraychev digest section 2).
 V_KAM2 = 0.360
@@ -204,36 +201,34 @@ def ascent(d, rho_p, u_gas, rho_g, mu_g, height, v0=0.0, drag_law="schiller_naum
 # ---------------------------------------------------------------------------------------------
 
 
-class PneumaticChannel:
+@register
+class PneumaticChannel(AbstractMotion):
     """Particles carried up a vertical channel by gas (module docstring).
+
+    The evaluation over the steady window (outlet temperatures, alpha_2, Nu_2, ...) travels in
+    the trajectory's ``info["channel"]`` (and so in ``summary.json``), the axial profiles in
+    ``records["profiles"]`` and ``channel_profiles.csv``.
 
     Parameters
     ----------
     scene : Scene
         Needs ``[channel]``, ``[dem]`` and ``[gas]`` (the gas inlet temperature); heat exchange
         with the gas when ``[heat.convection]`` is present.
-
-    Attributes
-    ----------
-    steady : dict
-        After :meth:`trajectory`: the evaluation over the steady window (outlet temperatures,
-        alpha_2, Nu_2, ...) and the axial profiles (``profiles``).
     """
 
-    autodiff = None
+    name = "pneumatic"
 
     def __init__(self, scene: Scene):
-        self.scene = scene
+        super().__init__(scene)
         ch, cfg = scene.channel, scene.dem
-        value = scene_values(scene)
-        self.group = group_index(scene)
-        n_groups = len(scene.groups)
-        self.diameter = np.concatenate([np.full(g.count, g.diameter) for g in scene.groups])
+        value = assemble.scene_values(scene)
+        self.setup = setup = assemble.dem_setup(scene)
+        self.group = assemble.group_index(scene)
+        self.diameter = assemble.diameters(scene)
         self.n = len(self.diameter)
         self.radius = 0.5 * self.diameter
-        self.density = np.array([float(group_property(scene, value, k, "density"))
-                                 for k in range(n_groups)])[self.group]
-        self.thermal = make_particles(scene, value)
+        self.density = setup.density
+        self.thermal = assemble.thermal_particles(scene, value)
         self.mass = np.asarray(self.thermal.mass, float)
         self.capacity = np.asarray(self.thermal.capacity, float)
         self.T_inlet = np.array([float(g.temperature) for g in scene.groups])[self.group]
@@ -250,13 +245,10 @@ class PneumaticChannel:
         self.W_gas = self.m_gas * self.cp_gas
         self.m_solids = ch.solids_mass_flow * self.D / ch.length  # kg/s into the slice
         # mechanics
-        self.params, self.k_n = scene_contact_params(scene, self.diameter)
-        self.mech = mechanical_particles(self.radius, self.density, group=self.group)
-        self.walls = (Plane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), wall_id=0),
-                      Plane((self.gap, 0.0, 0.0), (-1.0, 0.0, 0.0), wall_id=1))
+        self.params, self.k_n, self.mech = setup.params, setup.k_n, setup.particles
+        self.walls = assemble.channel_walls(scene)
         self.g = cfg.gravity
-        self.gravity = np.array([0.0, -cfg.gravity, 0.0])
-        self.dtype = jnp.float32 if cfg.precision == "float32" else jnp.float64
+        self.gravity, self.dtype, self.t_crit = setup.gravity, setup.dtype, setup.t_crit
         r_max = float(self.radius.max())
         self.skin = cfg.skin if cfg.skin is not None else r_max
         cutoff = 2 * r_max + self.skin
@@ -278,22 +270,11 @@ class PneumaticChannel:
         lo = np.array([0.0, ys.min() - s, 0.0])
         hi = np.array([self.gap, self.H + 4 * r_max, self.D])
         self.bounds = (lo, hi)
-        self.t_out = output_times(scene)
-        try:
-            probe = make_dem(self.mech, self.walls, self.params, dim=3, dt=cfg.dt,
-                             safety_factor=cfg.safety_factor, gravity=self.gravity,
-                             periodic_length=self.D, bounds=self.bounds, skin=self.skin,
-                             dtype=self.dtype)
-        except ValueError as err:
-            key = "channel.depth" if "periodic" in str(err) else "dem.dt"
-            raise SceneError(key, scene.get(key), str(err), scene.name) from None
-        self.t_crit = probe.t_crit
-        out_iv = scene.run.output_interval
-        self.steps_per_output = math.ceil(out_iv / probe.dt - 1e-9)
-        self.dt = out_iv / self.steps_per_output
+        self.dt, self.steps_per_output = assemble.fit_time_step(setup.dt,
+                                                                scene.run.output_interval)
         self.steady_after = ch.steady_after if ch.steady_after is not None else \
             0.5 * scene.run.duration
-        self.steady = None
+        self.dem = self.make_dem()
 
     # -- gas ------------------------------------------------------------------------------------
     def gas_props(self, T):
@@ -353,13 +334,10 @@ class PneumaticChannel:
         film = conv is not None and conv.property_temperature == "film"
         internal = conv is not None and conv.internal_resistance == "transient-sphere"
         if internal:
-            value = scene_values(self.scene)
-            lam_p = jnp.asarray(np.array([float(group_property(self.scene, value, k,
-                                                               "conductivity"))
-                                          for k in range(len(self.scene.groups))])[self.group])
+            value = assemble.scene_values(self.scene)
+            lam_p = jnp.asarray(assemble.particle_property(self.scene, value, "conductivity"))
             rho_c = C / (jnp.pi * d**3 / 6.0)
             t_E = self.holdup_estimate()["residence_time"]
-            self.internal_time = t_E
         if conv is not None and conv.correlation == "constant":
             alpha_const = float(conv.alpha)
         else:
@@ -518,8 +496,12 @@ class PneumaticChannel:
             acc[name] = jnp.zeros((), jnp.int32)
         return acc
 
-    def initial_state(self, dem):
+    def initial_state(self, params=None):
         """All particles parked (queued) at the inlet temperature, the channel empty."""
+        if params:
+            raise ValueError("motion model 'pneumatic' does not take parameter overrides; use "
+                             "scene overrides")
+        dem = self.dem
         extra = {
             "T": jnp.asarray(self.T_inlet, jnp.float64),
             "active": jnp.zeros(self.n, bool),
@@ -609,15 +591,32 @@ class PneumaticChannel:
         res["profiles"] = prof
         return res
 
-    # -- running --------------------------------------------------------------------------------
-    def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
-        """Run the channel; outputs per ``run.output_interval`` plus the steady evaluation."""
-        if params:
-            raise ValueError("motion model 'pneumatic' does not take parameter overrides; use "
-                             "scene overrides")
-        dem = self.make_dem()
-        state = self.initial_state(dem)
-        n_out = len(self.t_out)
+    # -- the loop -------------------------------------------------------------------------------
+    def model(self, params=None):
+        """No thermal model: the channel couples its gas itself (module docstring); the
+        particles start at their groups' (inlet) temperatures."""
+        return None, jnp.asarray(self.T_inlet, float)
+
+    def advance(self, state, t0, t1):
+        start = state._replace(extra=dict(state.extra, acc=self._zero_acc()),
+                               max_overlap=jnp.zeros_like(state.max_overlap))
+        return self.dem.run_steps(start, int(round((t1 - t0) / self.dt)))
+
+    def check(self, start, end, attempt=0):
+        try:
+            return self.dem.check_chunk(start, end, attempt)
+        except DEMError as err:
+            raise DEMError(f"{err} (scene {self.scene.name!r})", err.state) from None
+
+    def observe(self, state) -> dict:
+        ex = state.extra
+        return {"T": ex["T"], "Q": ex["Q"], "position": state.position, "acc": ex["acc"],
+                "H_gas": ex["H_gas"], "n_active": jnp.sum(ex["active"])}
+
+    def finish(self, rows, log, state) -> Trajectory:
+        """Outputs per ``run.output_interval`` plus the evaluation over the steady window."""
+        r = self.stack_rows(rows)
+        t_out = np.asarray(self.times)
         cols = {k: [np.nan] for k in ("T_gas_out", "T_particle_out", "solids_mass_flow",
                                       "holdup_mass", "alpha_2", "Nu_2", "alpha_2_holdup",
                                       "alpha_mean", "slip_mean")}
@@ -625,40 +624,24 @@ class PneumaticChannel:
                        "alpha_2_holdup", "alpha_mean", "slip_mean")
         for k in steady_cols:
             cols[f"{k}_steady"] = [np.nan]
-        cols["H_gas"] = [0.0]
-        cols["n_active"] = [0.0]
-        out = dict(T=[np.asarray(state.extra["T"])], pos=[np.asarray(state.position)],
-                   Q={"gas": [0.0], "flow": [0.0]}, pairs=[0.0], walls=[0.0])
-        steady_acc = None
-        with SimProgress(self.scene.run.duration, progress) as bar:
-            for t_end in self.t_out[1:]:
-                state = state._replace(extra=dict(state.extra, acc=self._zero_acc()))
-                state = dem.run(state, self.steps_per_output, chunk=self.steps_per_output)
-                ex = jax.device_get(state.extra)
-                acc = {k: np.asarray(v) for k, v in ex["acc"].items()}
-                ev = self.evaluate(acc)
-                if t_end > self.steady_after * (1 + 1e-12):
-                    steady_acc = acc if steady_acc is None else {
-                        k: steady_acc[k] + acc[k] for k in acc}
-                evs = self.evaluate(steady_acc) if steady_acc is not None else None
-                for k in cols:
-                    if k.endswith("_steady"):
-                        cols[k].append(evs[k[:-7]] if evs is not None else np.nan)
-                    elif k == "H_gas":
-                        cols[k].append(float(ex["H_gas"]))
-                    elif k == "n_active":
-                        cols[k].append(float(np.sum(ex["active"])))
-                    else:
-                        cols[k].append(ev[k])
-                out["T"].append(np.asarray(ex["T"]))
-                out["pos"].append(np.asarray(state.position, float))
-                out["Q"]["gas"].append(float(ex["Q"]["gas"]))
-                out["Q"]["flow"].append(float(ex["Q"]["flow"]))
-                out["pairs"].append(ev["pair_contacts_mean"])
-                out["walls"].append(ev["wall_contacts_mean"])
-                bar.update_to(t_end)
-        self.steady = evs
-        self.final_state = state
+        pairs, walls = [0.0], [0.0]
+        steady_acc = evs = None
+        for m in range(1, len(t_out)):
+            acc = {k: np.asarray(v[m]) for k, v in r["acc"].items()}
+            ev = self.evaluate(acc)
+            if t_out[m] > self.steady_after * (1 + 1e-12):
+                steady_acc = acc if steady_acc is None else {
+                    k: steady_acc[k] + acc[k] for k in acc}
+            evs = self.evaluate(steady_acc) if steady_acc is not None else None
+            for k in cols:
+                if k.endswith("_steady"):
+                    cols[k].append(evs[k[:-7]] if evs is not None else np.nan)
+                else:
+                    cols[k].append(ev[k])
+            pairs.append(ev["pair_contacts_mean"])
+            walls.append(ev["wall_contacts_mean"])
+        cols["H_gas"] = r["H_gas"]
+        cols["n_active"] = r["n_active"]
         if evs is not None and evs["starved_steps"] > 0:
             warnings.warn(f"scene {self.scene.name!r}: the feeder found no queued particle in "
                           f"{evs['starved_steps']} steps of the steady window: the solids flow "
@@ -673,17 +656,19 @@ class PneumaticChannel:
                           f"({evs['blocked_steps']} blocked steps). Raise "
                           "channel.particle_inlet_velocity or lower the flow.", UserWarning,
                           stacklevel=2)
-        files = {}
+        files, info, records = {}, {}, {}
         if evs is not None:
             files["channel.json"] = lambda path: _write_json(path, evs)
             files["channel_profiles.csv"] = lambda path: _write_profiles(path, evs["profiles"])
+            info["channel"] = {k: v for k, v in evs.items() if k != "profiles"}
+            records["profiles"] = evs["profiles"]
+        n_out = len(t_out)
         return Trajectory(
-            t=self.t_out, T=np.stack(out["T"]),
-            Q={k: np.asarray(v) for k, v in out["Q"].items()},
-            position=np.stack(out["pos"]), diameter=self.diameter, mass=self.mass,
-            capacity=self.capacity, group=self.group, n_contacts=np.asarray(out["pairs"]),
-            n_wall_contacts=np.asarray(out["walls"]), wall_area=np.zeros(n_out),
-            extra={k: np.asarray(v, float) for k, v in cols.items()}, files=files)
+            t=t_out, T=r["T"], Q=r["Q"], position=np.asarray(r["position"], float),
+            diameter=self.diameter, mass=self.mass, capacity=self.capacity, group=self.group,
+            n_contacts=np.asarray(pairs), n_wall_contacts=np.asarray(walls),
+            wall_area=np.zeros(n_out), extra={k: np.asarray(v, float) for k, v in cols.items()},
+            files=files, info=info, records=records)
 
 
 def _write_json(path, ev):

@@ -28,9 +28,9 @@ positions differ).
 
 The permutations are drawn from ``numpy.random.default_rng([run.seed, 1])`` (stream 1 of the
 run seed; the packing uses the seed itself), one after the other, so a run is reproducible and
-the k-th re-mix does not depend on the output grid. They are static (not traced): ``solve`` is
-differentiable with respect to every parameter in ``params`` (``jax.grad`` with the default
-``autodiff = "reverse"``, ``jax.jacfwd`` with ``"forward"``).
+the k-th re-mix does not depend on the output grid. They are drawn once when the model is built
+and travel in the state as integer arrays, so a run is differentiable with respect to every
+parameter in ``params`` and an ensemble over seeds is one vmapped program.
 """
 
 from __future__ import annotations
@@ -38,15 +38,15 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.assemble import group_index
-from drumheat.motion.static import StaticBed, integrate_network, stack_states
-from drumheat.runner.progress import SimProgress
-from drumheat.scene import Scene
-from drumheat.thermal.integrate import initial_state
-from drumheat.thermal.network import ContactNetwork
+from drumheat.motion.base import register
+from drumheat.motion.static import StaticBed
 from drumheat.motion.trajectory import Trajectory
+from drumheat.scene import Scene
+from drumheat.thermal.network import ContactNetwork
+from drumheat.thermal.solvers import initial_state
 
 
+@register
 class RandomBed(StaticBed):
     """Semi-discrete penetration model: a resting packing re-mixed every ``t_R``.
 
@@ -68,58 +68,59 @@ class RandomBed(StaticBed):
         Nominal diameter of every position of the packing, m (the permutation classes).
     """
 
-    supports_particle_sharding = False
+    name = "random"
+    vmappable = True
+    particle_shardable = False
 
     def __init__(self, scene: Scene):
         super().__init__(scene)
         self.t_R = float(scene.motion.t_R)
         self.remix = scene.motion.remix
         self.slot_diameter = np.asarray(self.packing.diameter, float)
-        self._classes = [np.flatnonzero(self.slot_diameter == d)
-                         for d in np.unique(self.slot_diameter)]
-        self._rng = np.random.default_rng([scene.run.seed, 1])
-        self._perms: list[np.ndarray] = []
         self._pairs = np.asarray(self.pairs, dtype=np.int64).reshape(-1, 2)
         self._wall = np.asarray(self.wall_particles, dtype=np.int64)
+        self.perms = self.permutations(len(self.remix_times()), scene.run.seed)
 
     # -- re-mixing schedule -------------------------------------------------------------------
     def remix_times(self, t_end: float | None = None) -> np.ndarray:
         """Re-mixing times ``k t_R`` (k = 1, 2, ...) strictly before ``t_end`` (default: the
         last output time), s."""
-        t_end = float(self.t_out[-1]) if t_end is None else float(t_end)
+        t_end = float(self.times[-1]) if t_end is None else float(t_end)
         k = int(np.floor(t_end / self.t_R * (1 + 1e-12)))
         t = self.t_R * np.arange(1, k + 1)
         # snap to output times that differ only by round-off (k t_R vs j dt_out)
-        t_out = np.asarray(self.t_out, float)
+        t_out = np.asarray(self.times, float)
         if len(t):
             nearest = t_out[np.argmin(np.abs(t_out[None, :] - t[:, None]), axis=1)]
             t = np.where(np.abs(nearest - t) <= 1e-12 * t, nearest, t)
         return t[t < t_end * (1 - 1e-12)]
 
+    def permutations(self, n: int, seed: int) -> np.ndarray:
+        """The first ``n`` re-mixings, shape (n, N): after the k-th (k = 1, 2, ...), position
+        ``s`` holds the particle that was at position ``perms[k - 1, s]`` before. Only
+        positions of equal nominal diameter are exchanged."""
+        rng = np.random.default_rng([seed, 1])
+        classes = [np.flatnonzero(self.slot_diameter == d) for d in np.unique(self.slot_diameter)]
+        out = np.tile(np.arange(len(self.slot_diameter)), (n, 1))
+        for k in range(n):
+            for cls in classes:
+                out[k, cls] = cls[rng.permutation(len(cls))]
+        return out
+
     def permutation(self, k: int) -> np.ndarray:
-        """The k-th re-mixing (k = 1, 2, ...) as a map of positions: after it, position ``s``
-        holds the particle that was at position ``perm[s]`` before. Only positions of equal
-        nominal diameter are exchanged."""
-        while len(self._perms) < k:
-            perm = np.arange(len(self.slot_diameter))
-            for cls in self._classes:
-                perm[cls] = cls[self._rng.permutation(len(cls))]
-            self._perms.append(perm)
-        return self._perms[k - 1]
+        """The k-th re-mixing (k = 1, 2, ...) as a map of positions (:meth:`permutations`)."""
+        perms = self.perms if k <= len(self.perms) else self.permutations(k, self.scene.run.seed)
+        return perms[k - 1]
 
-    def owners(self, k: int) -> np.ndarray:
-        """``owner[s]``: the particle at position ``s`` after ``k`` re-mixings (identity for k =
-        0 or for ``remix = "mean"``)."""
-        owner = np.arange(len(self.slot_diameter))
-        if self.remix == "permute":
-            for j in range(1, k + 1):
-                owner = owner[self.permutation(j)]
-        return owner
-
-    def network(self, owner: np.ndarray) -> ContactNetwork:
-        """The packing's contacts in particle numbering for the arrangement ``owner``."""
-        pairs = owner[self._pairs] if len(self._pairs) else self._pairs
-        return ContactNetwork.from_arrays(pairs, owner[self._wall])
+    @staticmethod
+    def network(owner, contacts) -> ContactNetwork:
+        """The packing's contacts in particle numbering for the arrangement ``owner``
+        (``owner[s]``: the particle at position ``s``); ``contacts`` holds the packing's pairs
+        and wall contacts as positions, with weights (0 marks padding)."""
+        pairs, pw, wall, ww = (contacts[k] for k in ("pairs", "pair_weight", "wall",
+                                                     "wall_weight"))
+        return ContactNetwork(owner[pairs[:, 0]], owner[pairs[:, 1]], pw, owner[wall],
+                              jnp.zeros(wall.shape[0], jnp.int32), ww)
 
     @staticmethod
     def mix_to_mean(T, capacity):
@@ -128,67 +129,71 @@ class RandomBed(StaticBed):
         Conserves ``sum C_i T_i`` to round-off (remix = "mean", weigler section 6.1)."""
         return jnp.full_like(T, jnp.sum(capacity * T) / jnp.sum(capacity))
 
-    # -- solve --------------------------------------------------------------------------------
-    def _segments(self):
-        """Rest periods as ``(k, grid)``: k re-mixings done before it; ``grid`` the times
-        (period start, outputs inside, period end) to integrate over."""
-        t_out = np.asarray(self.t_out, float)
-        edges = np.concatenate([[t_out[0]], self.remix_times(t_out[-1]), [t_out[-1]]])
-        segs = []
-        for k, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
-            inside = t_out[(t_out > a) & (t_out < b)]
-            segs.append((k, np.concatenate([[a], inside, [b]])))
-        return segs
+    def with_options(self, *, times=None, autodiff=None) -> "RandomBed":
+        new = super().with_options(times=times, autodiff=autodiff)
+        if times is not None:  # the re-mixings up to the new end
+            new.perms = new.permutations(len(new.remix_times()), self.scene.run.seed)
+        return new
 
-    def _run(self, params=None, progress: SimProgress | None = None):
+    def align(self, states):
+        """Pad the packings' contacts to common sizes (zero-weight slots)."""
+        n_p = max(int(s["contacts"]["pairs"].shape[0]) for s in states)
+        n_w = max(int(s["contacts"]["wall"].shape[0]) for s in states)
+
+        def pad(a, n):
+            return jnp.concatenate([a, jnp.zeros((n - a.shape[0],) + a.shape[1:], a.dtype)])
+
+        return [dict(s, contacts={"pairs": pad(c["pairs"], n_p),
+                                  "pair_weight": pad(c["pair_weight"], n_p),
+                                  "wall": pad(c["wall"], n_w),
+                                  "wall_weight": pad(c["wall_weight"], n_w)})
+                for s, c in ((s, s["contacts"]) for s in states)]
+
+    def shared(self) -> dict:
+        return dict(super().shared(), **{"the re-mixing (motion.t_R, motion.remix)":
+                                         (self.t_R, self.remix)})
+
+    # -- the loop -----------------------------------------------------------------------------
+    def initial_state(self, params=None):
         model, T0 = self.model(params)
-        capacity = model.particles.capacity
-        y = initial_state(model, T0)
-        t_out = np.asarray(self.t_out, float)
-        recorded = {0: y}
-        owners_at = {0: np.arange(len(T0))}
-        owner = np.arange(len(T0))
-        segs = self._segments()
-        for k, grid in segs:
-            if k > 0:  # re-mix at the start of this period
+        N = len(self.slot_diameter)
+        contacts = {"pairs": jnp.asarray(self._pairs, jnp.int32).reshape(-1, 2),
+                    "pair_weight": jnp.ones(len(self._pairs)),
+                    "wall": jnp.asarray(self._wall, jnp.int32),
+                    "wall_weight": jnp.ones(len(self._wall))}
+        return {"model": model, "y": initial_state(model, T0), "contacts": contacts,
+                "owner": jnp.arange(N, dtype=jnp.int32),
+                "perms": jnp.asarray(self.perms, jnp.int32)}
+
+    def advance(self, state, t0, t1):
+        """Integrate [t0, t1], re-mixing at the start of every rest period inside it: the
+        re-mix at ``k t_R`` happens at the start of the interval that begins there, so an
+        output at ``k t_R`` shows the state just before it."""
+        model, y, owner = state["model"], state["y"], state["owner"]
+        remix = self.remix_times()
+        cuts = remix[(remix > t0) & (remix < t1)]
+        edges = np.concatenate([[t0], cuts, [t1]])
+        for a, b in zip(edges[:-1], edges[1:]):
+            k = int(np.searchsorted(remix, a, side="right"))  # re-mixings at or before a
+            if k > 0 and remix[k - 1] == a:  # one at the start of this rest period
                 if self.remix == "permute":
-                    owner = owner[self.permutation(k)]
+                    owner = owner[state["perms"][k - 1]]
                 else:
-                    y = {"T": self.mix_to_mean(y["T"], capacity), "Q": y["Q"]}
-            states = integrate_network(self.scene, model, self.network(owner), y, grid,
-                                       progress, autodiff=self.autodiff)
-            for t, s in zip(grid[1:], states[1:]):
-                idx = np.flatnonzero(t_out == t)
-                if idx.size:
-                    recorded[int(idx[0])] = s
-                    owners_at[int(idx[0])] = owner
-            y = states[-1]
-        states = [recorded[i] for i in range(len(t_out))]
-        return states, [owners_at[i] for i in range(len(t_out))], model
+                    y = {"T": self.mix_to_mean(y["T"], model.particles.capacity), "Q": y["Q"]}
+            y = self.solver.advance(model, self.network(owner, state["contacts"]), y, float(a),
+                                    float(b))
+        return dict(state, y=y, owner=owner)
 
-    def solve(self, params=None, progress: SimProgress | None = None):
-        """Particle temperatures ``(n_out, N)`` (K, particles numbered as in the scene, not by
-        position) and exchanged heat ``{account: (n_out,)}`` (J) at ``self.t_out``.
+    def observe(self, state) -> dict:
+        return dict(super().observe(state), owner=state["owner"])
 
-        Differentiable with respect to the values in ``params`` (dotted scene keys).
-        """
-        states, _, model = self._run(params, progress)
-        return stack_states(states, model.accounts)
-
-    def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
-        """Run the scene; positions follow the particles through the re-mixings."""
-        with SimProgress(self.scene.run.duration, progress) as bar:
-            states, owners, model = self._run(params, bar)
-        T, Q = stack_states(states, model.accounts)
-        n_out = len(self.t_out)
+    def finish(self, rows, log, state) -> Trajectory:
+        """Positions follow the particles through the re-mixings."""
+        traj = super().finish(rows, log, state)
+        owners = np.stack([np.asarray(r["owner"]) for r in rows])
         pos = self.packing.position
         # particle p sits at position slot_of[p] = argsort(owner)[p]
-        position = np.stack([pos[np.argsort(o)] for o in owners])
-        d = np.asarray(model.particles.diameter)
-        return Trajectory(
-            t=np.asarray(self.t_out), T=np.asarray(T), Q={k: np.asarray(v) for k, v in Q.items()},
-            position=position, diameter=d, mass=np.asarray(model.particles.mass),
-            capacity=np.asarray(model.particles.capacity), group=group_index(self.scene),
-            n_contacts=np.full(n_out, len(self.pairs)),
-            n_wall_contacts=np.full(n_out, len(self.wall_particles)),
-            wall_area=np.full(n_out, float(np.sum(self.slot_diameter[self.wall_particles] ** 2))))
+        traj.position = np.stack([pos[np.argsort(o)] for o in owners])
+        traj.wall_area = np.full(len(self.times),
+                                 float(np.sum(self.slot_diameter[self.wall_particles] ** 2)))
+        return traj

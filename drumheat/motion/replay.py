@@ -22,18 +22,19 @@ coupled run is measured by ``scripts/accuracy_cost.py``.
 
 from __future__ import annotations
 
-from pathlib import Path
-
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.assemble import group_index, output_times
-from drumheat.motion.static import StaticBed
-from drumheat.runner.progress import SimProgress
-from drumheat.scene import Scene, SceneError
-from drumheat.thermal.network import ContactNetwork
+from drumheat import assemble
+from drumheat.motion.base import register
+from drumheat.motion.static import ThermalBed
 from drumheat.motion.trajectory import Trajectory
+from drumheat.scene import Scene
+from drumheat.thermal.network import ContactNetwork
+
+__all__ = ["Recording", "ReplayBed", "restart_assignment", "read_recording"]
 
 
 def _pad_csr(ptr, cols, fill, dtype):
@@ -109,6 +110,8 @@ class Recording:
         self.mean_wall = float(np.sum(rec["wall_duration"] * heated)) / self.span
         self.match = restart_assignment(self.positions[-1], self.positions[0],
                                         np.asarray(rec["group"]))
+        self.net = RecordedNetwork(self.pairs, self.walls, jnp.asarray(self.match), self.tau,
+                                   self.n_intervals)
 
     def network(self, k) -> ContactNetwork:
         """Contact network of interval ``k`` (weights = contact-time fractions)."""
@@ -116,99 +119,101 @@ class Recording:
         wp, ww, wid = (a[k] for a in self.walls)
         return ContactNetwork(i, j, w, wp, wid, ww)
 
-    def integrate(self, model, T0, Q0, g0: int, steps_per_output: int, n_outputs: int,
-                  progress: SimProgress | None = None, t0: float = 0.0):
-        """Explicit steps of one recording interval each, cyclically from interval ``g0``.
-
-        Returns the states ``(T, Q)`` at the ``n_outputs`` output times after the start
-        (``steps_per_output`` intervals apart) and the interval counter at the end. A step whose
-        counter is a positive multiple of the number of intervals first carries the
-        temperatures over to the restart positions (:func:`restart_assignment`).
-        """
-        K, tau = self.n_intervals, self.tau
-        match = jnp.asarray(self.match)
-        C = model.particles.capacity
-
-        def step(carry, _):
-            T, Q, g = carry
-            k = g % K
-            T = jnp.where((k == 0) & (g > 0), T[match], T)
-            q, ext = model.heat_flows(T, self.network(k))
-            return (T + tau * q / C, {a: Q[a] + tau * ext[a] for a in Q}, g + 1), None
-
-        advance = jax.jit(lambda c: jax.lax.scan(step, c, None, length=steps_per_output)[0])
-        carry = (jnp.asarray(T0, float), Q0, jnp.asarray(g0, jnp.int64))
-        Ts, Qs = [], []
-        for m in range(n_outputs):
-            carry = advance(carry)
-            Ts.append(carry[0])
-            Qs.append(carry[1])
-            if progress is not None:
-                progress.update_to(t0 + (m + 1) * steps_per_output * tau)
-        return Ts, Qs, int(carry[2])
-
     def position_at(self, g: int) -> np.ndarray:
         """Positions at the start of (cyclic) interval ``g``."""
         return self.positions[g % self.n_intervals]
 
 
-class ReplayBed(StaticBed):
-    """Thermal-only replay of a recorded contact network (see the module docstring)."""
+class RecordedNetwork(eqx.Module):
+    """The device part of a :class:`Recording`: the padded per-interval networks and the
+    restart assignment, with the replay step (a PyTree, so it can travel in a run's state).
 
-    supports_particle_sharding = False
+    pairs: (i, j, weight) arrays (K, P); walls: (particle, weight, wall id) arrays (K, W);
+    match: (N,) restart assignment; tau: recording interval, s; n_intervals: K.
+    """
+
+    pairs: tuple
+    walls: tuple
+    match: jax.Array
+    tau: float = eqx.field(static=True)
+    n_intervals: int = eqx.field(static=True)
+
+    def advance(self, model, T, Q, g, n_steps: int):
+        """``n_steps`` explicit steps of one recording interval each from the cyclic interval
+        counter ``g``: ``(T, Q, g)`` after them. A step whose counter is a positive multiple
+        of the number of intervals first carries the temperatures over to the restart
+        positions (:func:`restart_assignment`)."""
+        return _replay_steps(self, model, T, Q, g, int(n_steps))
+
+
+@eqx.filter_jit
+def _replay_steps(net: RecordedNetwork, model, T, Q, g, n_steps):
+    C = model.particles.capacity
+    K, tau = net.n_intervals, net.tau
+
+    def step(carry, _):
+        T, Q, g = carry
+        k = g % K
+        T = jnp.where((k == 0) & (g > 0), T[net.match], T)
+        i, j, w = (a[k] for a in net.pairs)
+        wp, ww, wid = (a[k] for a in net.walls)
+        q, ext = model.heat_flows(T, ContactNetwork(i, j, w, wp, wid, ww))
+        return (T + tau * q / C, {a: Q[a] + tau * ext[a] for a in Q}, g + 1), None
+
+    return jax.lax.scan(step, (T, Q, g), None, length=n_steps)[0]
+
+
+def read_recording(path) -> dict:
+    """The arrays of a ``contacts.npz`` recording."""
+    with np.load(path) as f:
+        return {k: f[k] for k in f.files}
+
+
+@register
+class ReplayBed(ThermalBed):
+    """Thermal-only replay of a recorded contact network (see the module docstring).
+
+    The state is ``{"model", "T", "Q", "g"}`` (``g`` the cyclic recording-interval counter).
+    The scene checks that the recording exists and fits (:mod:`drumheat.scene.rules`).
+    """
+
+    name = "replay"
+    vmappable = True
 
     def __init__(self, scene: Scene):
-        self.scene = scene
-        path = Path(scene.replay.file)
-        if not path.is_absolute() and scene.source_path:
-            path = Path(scene.source_path).parent / path
-        if not path.exists():
-            raise SceneError("replay.file", scene.replay.file, "no such recording (write one "
-                             "with a 'dem' run and dem.record_interval)", scene.name)
-        with np.load(path) as f:
-            raw = {k: f[k] for k in f.files}
-        self.group = group_index(scene)
-        n = len(self.group)
-        if int(raw["n_particles"]) != n:
-            raise SceneError("replay.file", scene.replay.file, f"holds {int(raw['n_particles'])}"
-                             f" particles; the scene has {n}", scene.name)
+        super().__init__(scene)
+        raw = read_recording(assemble.resolve_path(scene, scene.replay.file))
+        self.group = assemble.group_index(scene)
         raw["group"] = self.group
-        self.rec = rec = Recording(raw)
+        self.rec = Recording(raw)
         self.diameter = raw["diameter"]
-        self.t_out = output_times(scene)
-        self.steps_per_output = int(round(scene.run.output_interval / rec.tau))
-        if abs(self.steps_per_output * rec.tau - scene.run.output_interval) > 1e-9 * rec.tau:
-            raise SceneError("run.output_interval", scene.run.output_interval,
-                             f"must be a multiple of the recording interval {rec.tau:g} s",
-                             scene.name)
-        if len(self.t_out) > 1 and abs(self.t_out[-1] - self.t_out[-2]
-                                       - scene.run.output_interval) > 1e-9:
-            raise SceneError("run.duration", scene.run.duration, "must be a multiple of "
-                             "run.output_interval for a replay", scene.name)
-        if scene.run.duration > rec.span * (1 + 1e-12) and not scene.replay.cyclic:
-            raise SceneError("run.duration", scene.run.duration, f"exceeds the recording "
-                             f"({rec.span:g} s); set replay.cyclic = true or shorten the run",
-                             scene.name)
+        self.steps_per_output = int(round(scene.run.output_interval / self.rec.tau))
 
-    def solve(self, params=None, progress: SimProgress | None = None):
-        """Temperatures ``(n_out, N)`` and exchanged heat ``{account: (n_out,)}``;
-        differentiable with respect to ``params``."""
+    def initial_state(self, params=None):
         model, T0 = self.model(params)
-        Q0 = {a: jnp.zeros(()) for a in model.accounts}
-        Ts, Qs, _ = self.rec.integrate(model, T0, Q0, 0, self.steps_per_output,
-                                       len(self.t_out) - 1, progress)
-        Ts, Qs = [jnp.asarray(T0, float)] + Ts, [Q0] + Qs
-        return jnp.stack(Ts), {a: jnp.stack([q[a] for q in Qs]) for a in model.accounts}
+        return {"model": model, "T": jnp.asarray(T0, float),
+                "Q": {a: jnp.zeros(()) for a in model.accounts},
+                "g": jnp.asarray(0, jnp.int64)}
 
-    def trajectory(self, params=None, progress: bool | None = True) -> Trajectory:
-        model, _ = self.model(params)
-        with SimProgress(self.scene.run.duration, progress) as bar:
-            T, Q = self.solve(params, bar)
-        n_out = len(self.t_out)
+    def advance(self, state, t0, t1):
+        n = int(round((t1 - t0) / self.rec.tau))
+        T, Q, g = self.rec.net.advance(state["model"], state["T"], state["Q"], state["g"], n)
+        return dict(state, T=T, Q=Q, g=g)
+
+    def observe(self, state) -> dict:
+        return {"T": state["T"], "Q": state["Q"]}
+
+    def shared(self) -> dict:
+        return dict(super().shared(), **{"the recording (replay.file)": self.scene.replay.file})
+
+    def finish(self, rows, log, state) -> Trajectory:
+        r = self.stack_rows(rows)
+        model = state["model"]
+        n_out = len(self.times)
         rec = self.rec
         d2 = float(np.mean(self.diameter**2))
         return Trajectory(
-            t=self.t_out, T=np.asarray(T), Q={k: np.asarray(v) for k, v in Q.items()},
+            t=np.asarray(self.times), T=r["T"], Q=r["Q"],
             position=np.stack([rec.position_at(m * self.steps_per_output) for m in range(n_out)]),
             diameter=self.diameter, mass=np.asarray(model.particles.mass),
             capacity=np.asarray(model.particles.capacity), group=self.group,

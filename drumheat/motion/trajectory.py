@@ -36,6 +36,13 @@ class Trajectory:
         (particles with radial shells: from the shell enthalpies); used by the energy balance.
     files : dict
         Further result files: ``{file name: writer(path)}``, written by ``Result.save``.
+    info : dict
+        Further results of the motion model that are not time series (JSON-serialisable:
+        numbers, strings, lists, dicts), e.g. the phase table of a granulator run or the
+        steady-window evaluation of a channel; they go into ``summary.json`` under their keys.
+    records : dict
+        Further arrays of the run for analysis (e.g. the flow counters of a moving bed at the
+        output times); not written to files.
     """
 
     t: np.ndarray
@@ -52,3 +59,5 @@ class Trajectory:
     extra: dict = field(default_factory=dict)
     stored_heat: np.ndarray | None = None
     files: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+    records: dict = field(default_factory=dict)

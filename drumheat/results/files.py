@@ -146,7 +146,7 @@ def register_outputs(folder: str | Path, names) -> None:
 
 
 def _write_manifest(folder: Path, names) -> None:
-    from drumheat import __version__
+    from drumheat._version import __version__
 
     tmp = folder / f"{MANIFEST}.tmp"
     tmp.write_text(json.dumps({"drumheat": __version__, "files": sorted(names)}, indent=1)

@@ -30,7 +30,7 @@ matplotlib.use("Agg") if matplotlib.get_backend().lower() == "agg" else None
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from drumheat.analysis import observe  # noqa: E402
+from drumheat.results import observe  # noqa: E402
 
 #: 0 degC in K.
 C0 = 273.15
@@ -167,7 +167,7 @@ def read_particles(result_dir) -> ParticleFrames:
         from drumheat.scene import SceneError, load_scene
 
         try:
-            scene = load_scene(folder / "scene.toml")
+            scene = load_scene(folder / "scene.toml", check_files=False)
         except SceneError as err:  # e.g. written by another drumheat version
             warnings.warn(f"{folder / 'scene.toml'} is not a valid scene for this drumheat "
                           f"version ({err}); drawing without the drum walls", stacklevel=2)
@@ -245,7 +245,7 @@ def scene_walls(scene, t: float = 0.0) -> list[dict]:
     if scene is None:
         return []
     if scene.drum is None and getattr(scene, "hopper", None) is not None:
-        from drumheat.motion.moving_bed import hopper_walls
+        from drumheat.geometry.hopper import hopper_walls
 
         g = hopper_walls(scene.hopper)
         top = g.crest + scene.hopper.insertion_height
@@ -589,7 +589,7 @@ def plot_alpha_overall(result, ax=None, smooth=None):
     """Overall wall-to-bed coefficient (weigler eq. [1.10]) and its log-log slope over time.
 
     Top: alpha_overall, W/(m2 K), on log-log axes. Bottom: ``d ln alpha / d ln t``
-    (:func:`drumheat.analysis.observe.log_slope`) on a log time axis, with the ideal penetration
+    (:func:`drumheat.results.observe.log_slope`) on a log time axis, with the ideal penetration
     regime -0.5 marked.
 
     Parameters
@@ -817,6 +817,41 @@ def plot_contact_network(result, index=-1, pairs=None, color_by="heat_flow", ax=
 # ---------------------------------------------------------------------------------------------
 # The standard set
 # ---------------------------------------------------------------------------------------------
+
+#: the figures :func:`plot` draws, by name
+FIGURES = {
+    "mean_temperatures": plot_mean_temperatures,
+    "distributions": plot_distributions,
+    "alpha_overall": plot_alpha_overall,
+    "snapshot": plot_snapshot,
+    "contact_network": plot_contact_network,
+}
+
+
+def plot(result, kind: str = "mean_temperatures", **kwargs):
+    """A figure of a run: ``drumheat.plot(result)``, ``drumheat.plot(result, "snapshot")``.
+
+    Parameters
+    ----------
+    result : Result, or a result folder (path) for ``"snapshot"`` and ``"contact_network"``
+    kind : str
+        One of ``"mean_temperatures"`` (default), ``"distributions"``, ``"alpha_overall"``,
+        ``"snapshot"``, ``"contact_network"`` (:data:`FIGURES`).
+    **kwargs
+        Passed to the ``plot_<kind>`` function (e.g. ``ax``, ``index``, ``data``).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if kind not in FIGURES:
+        import difflib
+
+        close = difflib.get_close_matches(kind, FIGURES, n=1)
+        raise ValueError(f"unknown figure {kind!r}" + (f" (did you mean {close[0]!r}?)" if close
+                                                        else "") + "; figures: "
+                         + ", ".join(FIGURES))
+    return FIGURES[kind](result, **kwargs)
 
 
 def save_figures(result, folder) -> list[Path]:

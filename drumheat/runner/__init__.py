@@ -1,3 +1,3 @@
 """The run loop, ensembles, sharding, the compile cache and the progress bar."""
 
-from drumheat.runner.loop import Result, energy_balance, make_motion, make_result, run  # noqa: F401
+from drumheat.runner.loop import run, simulate, trace  # noqa: F401

@@ -16,19 +16,12 @@ from __future__ import annotations
 
 import os
 
+from drumheat.environment import cache_dir_setting
+
 __all__ = ["enable_compilation_cache", "cache_dir_setting"]
 
 # programs that compile in less than this (s) are not written to the cache
 MIN_COMPILE_TIME_S = 0.2
-
-
-def cache_dir_setting() -> str | bool | None:
-    """``DRUMHEAT_CACHE_DIR``: a folder (str), False when switched off (``off``, ``0``,
-    ``none``, ``false`` or empty), None when not set."""
-    env = os.environ.get("DRUMHEAT_CACHE_DIR")
-    if env is None:
-        return None
-    return False if env.strip().lower() in ("off", "0", "none", "false", "") else env
 
 
 def enable_compilation_cache() -> str | None:

@@ -1,131 +1,113 @@
-"""The runner: run a scene with its motion model, collect observables, write result files.
+"""The run loop: one loop for every motion model, ``drumheat.run(scene) -> Result``.
 
-``drumheat.run(scene) -> Result`` is the Python API the command line is a thin layer over.
+:func:`simulate` drives a motion model (:class:`~drumheat.motion.base.AbstractMotion`) through
+its chunks: a pure ``advance`` per chunk, a host-side check that may redo the chunk (e.g. with
+larger neighbour buffers), an observation at every output time and the host-side work between
+chunks (contact recording, phase switches); then the motion model turns the observations into
+a :class:`~drumheat.motion.trajectory.Trajectory`. :func:`run` wraps it: scene in, checked
+output folder, :class:`~drumheat.results.result.Result` out. :func:`trace` is the same loop
+without host-side work, for differentiating a run (:mod:`drumheat.analysis.calibrate`).
+``drumheat.run_ensemble`` (:mod:`drumheat.runner.ensemble`) is this loop over ``vmap``.
 """
 
 from __future__ import annotations
 
-import importlib
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import numpy as np
-import pandas as pd
 
-from drumheat.analysis import observe
-from drumheat.scene import Scene, load_scene
+from drumheat.motion import AbstractMotion, make_motion
 from drumheat.motion.trajectory import Trajectory
+from drumheat.results.files import check_out_dir
+from drumheat.results.result import Result, make_result
+from drumheat.runner.compile_cache import enable_compilation_cache
+from drumheat.runner.progress import SimProgress
+from drumheat.runner.sharding import make_mesh, resolve_devices, shard_particles
+from drumheat.scene import Scene, load_scene
+
+__all__ = ["run", "simulate", "trace", "advance_checked", "MAX_REDO"]
+
+#: how often a chunk may be redone (each time with larger buffers) before a run stops
+MAX_REDO = 9
 
 
-def make_motion(scene: Scene):
-    """The motion-model object of a scene (``StaticBed``, ...); it builds packing and contacts.
-
-    Every motion model offers
-    ``solve(params) -> (T, Q)`` (differentiable) and ``trajectory(params, progress) ->
-    Trajectory``.
-    """
-    module, cls = _MOTION_CLASSES[scene.motion.model].split(":")
-    return getattr(importlib.import_module(module), cls)(scene)
-
-
-#: Motion models and the class implementing each ("module:Class", imported on use).
-_MOTION_CLASSES = {
-    "static": "drumheat.motion.static:StaticBed",
-    "random": "drumheat.motion.random:RandomBed",
-    "granulator": "drumheat.motion.granulator:GranulatorParticle",
-    "fluidized": "drumheat.motion.fluidized:FluidizedBed",
-    "dem": "drumheat.motion.dem:DEMBed",
-    "replay": "drumheat.motion.replay:ReplayBed",
-    "pneumatic": "drumheat.motion.pneumatic:PneumaticChannel",
-    "moving_bed": "drumheat.motion.moving_bed:MovingBed",
-}
+def advance_checked(motion: AbstractMotion, state, t0: float, t1: float):
+    """One chunk of a run: ``motion.advance``, redone from the start state that
+    ``motion.check`` hands back (at most :data:`MAX_REDO` times)."""
+    start = state
+    for attempt in range(MAX_REDO):
+        end = motion.advance(start, t0, t1)
+        redo = motion.check(start, end, attempt)
+        if redo is None:
+            return end
+        start = redo
+    raise RuntimeError(f"the chunk from t = {t0:g} s to {t1:g} s had to be redone "
+                       f"{MAX_REDO} times (neighbour buffers kept overflowing); the packing "
+                       "may be exploding: reduce the time step or check the inputs")
 
 
-@dataclass
-class Result:
-    """A finished run.
+def output_flags(motion: AbstractMotion) -> np.ndarray:
+    """Which chunk ends of ``motion.times`` are output times (bool, one per chunk end)."""
+    flags = np.zeros(len(motion.times), bool)
+    flags[motion.output_index if motion.output_index is not None else slice(None)] = True
+    return flags
 
-    Attributes
+
+def simulate(motion: AbstractMotion, params: dict | None = None,
+             progress: bool | None = True, mesh=None, return_state: bool = False):
+    """Run a motion model through all its chunks; the :class:`Trajectory` it makes of it.
+
+    Parameters
     ----------
-    scene : Scene
-    trajectory : Trajectory
-        Particle temperatures (and positions) at the output times.
-    timeseries : pandas.DataFrame
-        Columns ``t`` (s), ``T_mean`` (K, mass-weighted), ``T_mean:<group>``, ``T_min``,
-        ``T_max`` and, as the scene calls for, ``Q_wall`` (J received from walls since t = 0;
-        a drum with internals adds ``Q_wall:shell``, ``Q_wall:inner``, ``Q_wall:plates``),
-        ``Q_loss`` (J lost to the gas since t = 0) and ``alpha_overall`` (W/(m2 K), eq. [1.10]).
-    summary : dict
-        What ``summary.json`` holds.
+    motion : AbstractMotion
+    params : dict, optional
+        Dotted scene keys with values replacing the scene's (e.g. in a fit).
+    progress : bool
+        Show a progress bar over simulated time (for runs longer than ~2 s).
+    mesh : jax.sharding.Mesh, optional
+        Split the state's per-particle arrays over this device mesh.
+    return_state : bool
+        Return ``(trajectory, final state)`` instead of the trajectory alone.
     """
-
-    scene: Scene
-    trajectory: Trajectory
-    timeseries: pd.DataFrame
-    summary: dict
-
-    @property
-    def t(self) -> np.ndarray:
-        return self.trajectory.t
-
-    @property
-    def T(self) -> np.ndarray:
-        return self.trajectory.T
-
-    def save(self, out_dir: str | Path | None = None, figures: bool = True) -> Path:
-        """Write the result files (see DESIGN.md) to ``out_dir`` (default results/<scene>)."""
-        from drumheat.results.files import write_results
-
-        return write_results(self, out_dir, figures=figures)
+    state = motion.initial_state(params)
+    if mesh is not None:
+        state = shard_particles(state, mesh, motion.scene.n_particles)
+    log = motion.start_log(state, params)
+    is_output = output_flags(motion)
+    rows = [jax.device_get(motion.observe(state))]
+    times = motion.times
+    with SimProgress(float(times[-1] - times[0]), progress) as bar:
+        for i, (t0, t1) in enumerate(zip(times[:-1], times[1:])):
+            state = advance_checked(motion, state, float(t0), float(t1))
+            if is_output[i + 1]:
+                rows.append(jax.device_get(motion.observe(state)))
+            state, log = motion.between(state, log, float(t1))
+            bar.update_to(float(t1 - times[0]))
+    traj = motion.finish(rows, log, state)
+    return (traj, state) if return_state else traj
 
 
-def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
-    """Energy book-keeping: stored-heat change minus heat received, and its relative error.
-
-    Returns ``(residual_J (n_out,), rel_error)`` where ``residual = sum_i m_i c_i (T_i(t) -
-    T_i(0)) - sum_accounts Q(t)`` and ``rel_error = max |residual| / scale`` with
-    ``scale = sum_i m_i c_i |T_i(0) - T_mean(0)| + max |Q_account|`` (the heat that moved inside
-    the bed plus the heat exchanged with the outside). Where the trajectory carries
-    ``stored_heat`` (particles with radial shells) the stored-heat change is taken from it.
-    """
-    if traj.stored_heat is not None:  # particles with shells: from the shell enthalpies
-        stored = np.asarray(traj.stored_heat, float)
-    else:
-        stored = (traj.T - traj.T[0]) @ traj.capacity
-    received = sum(traj.Q.values()) if traj.Q else np.zeros_like(stored)
-    residual = stored - received
-    T0 = traj.T[0]
-    scale = float(np.sum(traj.capacity * np.abs(T0 - np.average(T0, weights=traj.capacity))))
-    scale += sum(float(np.max(np.abs(q))) for q in traj.Q.values())
-    rel = float(np.max(np.abs(residual)) / scale) if scale > 0 else float(np.max(np.abs(residual)))
-    return residual, rel
-
-
-def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
-    """The time-series table of a run (columns as in :class:`Result`)."""
-    cols = {"t": traj.t, "T_mean": traj.T @ traj.mass / traj.mass.sum()}
-    for k, g in enumerate(scene.groups):
-        m = traj.group == k
-        cols[f"T_mean:{g.name}"] = traj.T[:, m] @ traj.mass[m] / traj.mass[m].sum()
-    cols["T_min"], cols["T_max"] = traj.T.min(axis=1), traj.T.max(axis=1)
-    if "wall" in traj.Q:
-        cols["Q_wall"] = traj.Q["wall"]
-    surfaces = sorted(a for a in traj.Q if a.startswith("wall:"))
-    if surfaces:  # a drum with internals: the total here, each surface (Q_wall:<surface>) below
-        cols["Q_wall"] = sum(traj.Q[a] for a in surfaces)
-    if "wall" in traj.Q and scene.drum is not None and scene.drum.wall_temperature is not None:
-        T_cap = traj.T @ traj.capacity / traj.capacity.sum()
-        cols["alpha_overall"] = np.asarray(observe.alpha_overall(
-            traj.t, T_cap, scene.drum.wall_temperature, T_cap[0], traj.capacity.sum(),
-            traj.wall_area))
-    if "gas" in traj.Q:
-        cols["Q_loss"] = -traj.Q["gas"]
-    for account in sorted(set(traj.Q) - {"wall", "gas"}):
-        cols[f"Q_{account}"] = traj.Q[account]  # heat received from it since t = 0, J
-    for name, values in traj.extra.items():
-        cols[name] = values
-    return pd.DataFrame(cols)
+def trace(motion: AbstractMotion, params: dict | None = None) -> tuple:
+    """The temperatures ``(n_out, N)`` and heat accounts ``{account: (n_out,)}`` of a run as
+    device arrays, differentiable with respect to ``params`` (the motion model must be
+    ``differentiable``; no host-side checks or work between chunks)."""
+    if not motion.differentiable:
+        raise ValueError(f"motion model {motion.name!r} cannot be differentiated (its run has "
+                         "host-side control flow)")
+    state = motion.initial_state(params)
+    is_output = output_flags(motion)
+    rows = [motion.observe(state)]
+    times = motion.times
+    for i, (t0, t1) in enumerate(zip(times[:-1], times[1:])):
+        state = motion.advance(state, float(t0), float(t1))
+        if is_output[i + 1]:
+            rows.append(motion.observe(state))
+    T = jnp.stack([r["T"] for r in rows])
+    Q = {a: jnp.stack([r["Q"][a] for r in rows]) for a in rows[0]["Q"]}
+    return T, Q
 
 
 def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None = True,
@@ -133,15 +115,16 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     """Run a scene and return its :class:`Result`; write result files if ``out`` is given.
 
     Compiled programs are kept in JAX's persistent compilation cache
-    (:mod:`drumheat.runner.compile_cache`; ``DRUMHEAT_CACHE_DIR=off`` leaves it alone), so running
-    the same scene again does not compile again.
+    (:mod:`drumheat.runner.compile_cache`; ``DRUMHEAT_CACHE_DIR=off`` leaves it alone), so
+    running the same scene again does not compile again.
 
     Parameters
     ----------
     scene : Scene or str
         A scene, a built-in scene name or a path to a scene file.
     out : path, optional
-        Result folder; nothing is written when None (call ``result.save()`` later).
+        Result folder; checked before the run (:func:`drumheat.results.files.check_out_dir`);
+        nothing is written when None (call ``result.save()`` later).
     progress : bool
         Show a progress bar (it appears only for runs longer than ~2 s).
     params : dict, optional
@@ -159,69 +142,24 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         many variants of a scene use :func:`drumheat.run_ensemble`, which splits the
         variants over the devices instead.
     """
-    from drumheat.runner.compile_cache import enable_compilation_cache
-
     enable_compilation_cache()
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
-        scene = scene.with_overrides(overrides)
+        scene = scene.replace(overrides)
     if out is not None:
-        from drumheat.results.files import check_out_dir
-
         check_out_dir(out)  # before the run, not after it
     start = time.perf_counter()
     motion = make_motion(scene)
     mesh = None
-    if devices is not None:
-        from drumheat.runner.sharding import make_mesh, resolve_devices
-
-        devs = resolve_devices(devices)
-        if devs is not None and len(devs) > 1:
-            if not getattr(motion, "supports_particle_sharding", False):
-                raise ValueError(f"motion model {scene.motion.model!r} does not support "
-                                 "devices= (particle-axis sharding); supported: static, dem")
-            mesh = make_mesh(devs)
-    if mesh is not None:
-        motion.mesh = mesh
-    traj = motion.trajectory(params, progress=progress)
-    wall_time = time.perf_counter() - start
-    result = make_result(scene, traj, wall_time)
+    devs = resolve_devices(devices)
+    if devs is not None and len(devs) > 1:
+        if not motion.particle_shardable:
+            raise ValueError(f"motion model {scene.motion.model!r} does not support devices= "
+                             "(particle-axis sharding); supported: static, dem")
+        mesh = make_mesh(devs)
+    traj = simulate(motion, params, progress, mesh)
+    result = make_result(scene, traj, time.perf_counter() - start)
     if out is not None:
         result.save(out)
     return result
-
-
-def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
-    """A :class:`Result` from a finished trajectory: time series, energy balance, summary.
-
-    Parameters
-    ----------
-    scene : Scene
-    traj : Trajectory
-    wall_time : float
-        Wall-clock time of the run, s (goes into the summary).
-
-    Raises
-    ------
-    FloatingPointError
-        If a temperature became NaN or Inf.
-    """
-    ts = build_timeseries(scene, traj)
-    _, rel = energy_balance(traj)
-    if not np.all(np.isfinite(traj.T)):
-        raise FloatingPointError(f"scene {scene.name!r}: temperatures became NaN/Inf; "
-                                 "reduce run.dt or use run.solver = 'implicit'")
-    summary = {
-        "scene": scene.name,
-        "n_particles": int(scene.n_particles),
-        "duration_s": float(traj.t[-1] - traj.t[0]),
-        "wall_time_s": round(wall_time, 3),
-        "energy_balance_rel_error": rel,
-        "effects": list(scene.heat.effects()),
-        "motion": scene.motion.model,
-        "n_contacts": float(np.mean(traj.n_contacts)),
-        "n_wall_contacts": float(np.mean(traj.n_wall_contacts)),
-    }
-    summary.update({k: float(v) for k, v in ts.iloc[-1].items() if k != "t"})
-    return Result(scene, traj, ts, summary)

@@ -29,6 +29,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from drumheat.devices import to_host  # noqa: F401 (re-exported)
+
 AXIS = "d"
 
 __all__ = ["AXIS", "make_mesh", "resolve_devices", "pad_to_multiple", "unpad", "shard_batch",
@@ -159,24 +161,3 @@ def shard_particles(tree, mesh: Mesh, n: int, warn: bool = True):
         return jax.device_put(a, split if a.ndim >= 1 and a.shape[0] == n else rep)
 
     return jax.tree_util.tree_map(place, tree)
-
-
-def to_host(tree):
-    """Fetch a PyTree of (possibly sharded) arrays to host NumPy arrays.
-
-    In one process this is ``jax.device_get``. In a multi-process run (``jax.distributed``) an
-    array split over the devices of several processes is not addressable from one process;
-    it is then gathered to every process with
-    ``jax.experimental.multihost_utils.process_allgather`` (every process must call this at
-    the same point of the program).
-    """
-    if jax.process_count() == 1:
-        return jax.device_get(tree)
-    from jax.experimental import multihost_utils
-
-    def get(a):
-        if isinstance(a, jax.Array) and not a.is_fully_addressable:
-            return np.asarray(multihost_utils.process_allgather(a, tiled=True))
-        return jax.device_get(a)
-
-    return jax.tree_util.tree_map(get, tree)

@@ -12,6 +12,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from drumheat.scene.rules import CHECK_FILES
 from drumheat.scene.spec import SceneError, build_table, did_you_mean, parse_override, set_path
 from drumheat.scene.tables import Scene
 
@@ -64,8 +65,8 @@ def read_scene_dict(name_or_path: str | Path) -> tuple[dict, str | None]:
         raise SceneError("SCENE", str(name_or_path), f"not valid TOML ({err})") from None
 
 
-def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | list[str] | None = None
-               ) -> Scene:
+def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | list[str] | None = None,
+               *, check_files: bool = True) -> Scene:
     """Load and validate a built-in scene (by name) or a TOML scene file (by path).
 
     Parameters
@@ -75,6 +76,9 @@ def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | list[str] |
     overrides : dict or list of str, optional
         Dotted-path overrides applied before validation, as a dict
         (``{"groups.0.temperature": 300.0}``) or as ``KEY=VALUE`` strings (as ``--set``).
+    check_files : bool
+        Check the files the scene names (a packing, a recording); off to read the scene of a
+        result folder, whose input files need not be at hand.
 
     Raises
     ------
@@ -86,4 +90,8 @@ def load_scene(name_or_path: str | Path, overrides: dict[str, Any] | list[str] |
         overrides = dict(parse_override(o) for o in overrides)
     for key, value in (overrides or {}).items():
         set_path(raw, key, value, raw.get("name"))
-    return scene_from_dict(raw, source_path=src)
+    token = CHECK_FILES.set(check_files)
+    try:
+        return scene_from_dict(raw, source_path=src)
+    finally:
+        CHECK_FILES.reset(token)

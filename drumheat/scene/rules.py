@@ -9,9 +9,15 @@ accepts is one :func:`~drumheat.run` accepts.
 
 from __future__ import annotations
 
+import contextvars
 import math
 import re
+from pathlib import Path
 
+import numpy as np
+
+from drumheat.materials import material
+from drumheat.models.soft_sphere import critical_time_step, normal_stiffness_from_youngs
 from drumheat.scene.spec import REQUIRED, SceneError
 
 #: the motion models (drumheat.motion registers one class under each name)
@@ -31,9 +37,146 @@ def motion_name(motion) -> str:
     return motion.model
 
 
+#: whether the files a scene names (packing, recording) are checked (off while reading the
+#: scene of a result folder, whose input files need not be at hand)
+CHECK_FILES: contextvars.ContextVar = contextvars.ContextVar("drumheat_check_files",
+                                                             default=True)
+
+
 def check_scene(s) -> None:
     """Every cross-table rule of scene ``s``; raises :class:`SceneError` naming the key."""
     _check_consistency(s)
+    if s.dem is not None:
+        _check_dem(s)
+    if CHECK_FILES.get():
+        if s.motion.model == "replay":
+            _check_replay(s)
+        if s.packing.method == "file":
+            _check_packing_file(s)
+
+
+def scene_path(s, path: str) -> Path:
+    """A file named in a scene (packing, recording): relative to the scene file."""
+    p = Path(path)
+    if not p.is_absolute() and s.source_path:
+        p = Path(s.source_path).parent / p
+    return p
+
+
+def _npz_arrays(s, key: str, path: str, what: str, keys: tuple) -> dict:
+    p = scene_path(s, path)
+    if not p.is_file():
+        raise SceneError(key, path, f"no such file ({what})", s.name)
+    try:
+        with np.load(p, allow_pickle=False) as f:
+            missing = [k for k in keys if k not in f.files]
+            if missing:
+                raise SceneError(key, path, f"is not {what}: it lacks the arrays "
+                                 + ", ".join(missing), s.name)
+            return {k: f[k] for k in keys}
+    except (OSError, ValueError) as err:
+        raise SceneError(key, path, f"cannot be read as {what} ({err})", s.name) from None
+
+
+def _check_replay(s) -> None:
+    """The recording of motion model 'replay' exists, holds the scene's particles and fits the
+    output times (drumheat.motion.replay)."""
+    n = s.name
+    rec = _npz_arrays(s, "replay.file", s.replay.file, "a contacts.npz recording written by a "
+                      "'dem' run with dem.record_interval", ("interval", "n_particles",
+                                                             "pair_ptr"))
+    if int(rec["n_particles"]) != s.n_particles:
+        raise SceneError("replay.file", s.replay.file, f"holds {int(rec['n_particles'])} "
+                         f"particles; the scene has {s.n_particles}", n)
+    tau = float(rec["interval"])
+    out_iv = s.run.output_interval
+    steps = round(out_iv / tau)
+    if steps < 1 or abs(steps * tau - out_iv) > 1e-9 * tau:
+        raise SceneError("run.output_interval", out_iv, "must be a multiple of the recording "
+                         f"interval {tau:g} s", n)
+    k = s.run.duration / out_iv
+    if abs(k - round(k)) > 1e-9 * max(k, 1.0):
+        raise SceneError("run.duration", s.run.duration, "must be a multiple of "
+                         "run.output_interval for a replay", n)
+    span = tau * (len(rec["pair_ptr"]) - 1)
+    if s.run.duration > span * (1 + 1e-12) and not s.replay.cyclic:
+        raise SceneError("run.duration", s.run.duration, f"exceeds the recording ({span:g} s); "
+                         "set replay.cyclic = true or shorten the run", n)
+
+
+def _check_packing_file(s) -> None:
+    """The packing file of method 'file' exists and holds the scene's particles."""
+    pk = _npz_arrays(s, "packing.file", s.packing.file, "a packing (.npz with the array "
+                     "position)", ("position",))
+    shape = np.shape(pk["position"])
+    if shape != (s.n_particles, s.dim):
+        raise SceneError("packing.file", s.packing.file, f"holds positions of shape {shape}; "
+                         f"the scene has {s.n_particles} particles in {s.dim}D", s.name)
+
+
+def group_value(s, k: int, prop: str) -> float:
+    """A material property of group ``k``: the group's own value or the library's."""
+    g = s.groups[k]
+    v = getattr(g, prop)
+    return float(v) if v is not None else float(getattr(material(g.material), prop))
+
+
+def dem_stiffness(s) -> tuple[float, float]:
+    """``(k_n, k_wall)`` of the ``[dem]`` table, N/m: ``dem.stiffness``, else ``E A_p / d_p``
+    of the smallest particle with the softest material (weigler eq. [2.3]); the wall stiffness
+    defaults to k_n."""
+    d = s.dem
+    k_n = d.stiffness
+    if k_n is None:
+        E = min(group_value(s, k, "youngs_modulus") for k in range(len(s.groups)))
+        k_n = float(normal_stiffness_from_youngs(E, min(g.diameter for g in s.groups)))
+    return k_n, (d.wall_stiffness if d.wall_stiffness is not None else k_n)
+
+
+def dem_critical_time_step(s) -> float:
+    """``t_crit = 2 sqrt(m_min / k_max)`` of the scene's DEM, s (weigler eq. [2.1]), with the
+    lightest particle and the largest stiffness (normal = tangential, particle or wall)."""
+    m_min = min(group_value(s, k, "density") * math.pi * g.diameter**3 / 6.0
+                for k, g in enumerate(s.groups))
+    return critical_time_step(m_min, max(dem_stiffness(s)))
+
+
+def _check_periodic_slice(s, key: str, length: float, default_skin: float) -> None:
+    """A periodic slice must be at least twice the neighbour cutoff ``d_max + skin`` long."""
+    d_max = max(g.diameter for g in s.groups)
+    skin = s.dem.skin if s.dem.skin is not None else default_skin * d_max
+    if length < 2.0 * (d_max + skin) * (1 - 1e-12):
+        raise SceneError(key, length, "the periodic slice must be at least twice the neighbour "
+                         f"cutoff (largest diameter + skin = {d_max + skin:g} m) long, i.e. >= "
+                         f"{2 * (d_max + skin):g} m", s.name)
+
+
+def _check_dem(s) -> None:
+    """The mechanical time step of ``[dem]``: at most the critical step (weigler [2.1]); the
+    periodic slices of the DEM models long enough for their neighbour lists."""
+    n, d = s.name, s.dem
+    # default skins: half the largest radius (drumheat.mechanics.make_dem), the channel's
+    # whole radius (drumheat.motion.pneumatic)
+    if s.motion.model == "dem" and s.dim == 3 and s.drum is not None and s.drum.depth:
+        _check_periodic_slice(s, "drum.depth", s.drum.depth, 0.25)
+    if s.motion.model == "pneumatic" and s.channel is not None:
+        _check_periodic_slice(s, "channel.depth", s.channel.depth, 0.5)
+    if d.dt is not None:
+        t_crit = dem_critical_time_step(s)
+        if d.dt > t_crit:
+            k_n, k_w = dem_stiffness(s)
+            raise SceneError("dem.dt", d.dt, f"must not exceed the critical time step t_crit = "
+                             f"2 sqrt(m_min/k) = {t_crit:.4g} s (weigler eq. [2.1], k = "
+                             f"{max(k_n, k_w):.4g} N/m); leave dem.dt out for "
+                             f"dem.safety_factor x t_crit, or soften dem.stiffness "
+                             "(the step grows as 1/sqrt(k))", n)
+    out_iv = s.run.output_interval
+    if d.record_interval is not None:
+        ratio = out_iv / d.record_interval
+        if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+            raise SceneError("dem.record_interval", d.record_interval,
+                             f"must divide run.output_interval = {out_iv:g} s into a whole "
+                             "number of recording intervals", n)
 
 
 _NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")
@@ -103,6 +246,11 @@ def _check_consistency(s) -> None:
     if s.motion.model == "dem" and s.dem is None:
         raise SceneError("dem", REQUIRED, "motion model 'dem' needs the [dem] table "
                          "(its keys all have defaults: [dem] alone is enough)", n)
+    if s.heat.internal is not None and s.motion.model in ("dem", "replay", "moving_bed"):
+        raise SceneError("heat.internal", "a table", f"motion model '{s.motion.model}' "
+                         "supports lumped particles only so far (radial shells need the static, "
+                         "random, fluidized or granulator motion models); remove "
+                         "[heat.internal]", n)
     if s.motion.model == "replay" and s.replay is None:
         raise SceneError("replay.file", REQUIRED, "motion model 'replay' needs "
                          "[replay] file = a contacts.npz recorded by a 'dem' run", n)

@@ -4,22 +4,14 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import jax.numpy as jnp
 from jax import Array
 
+from drumheat.models import schluender
+from drumheat.models.contact_conductance import projected_area
+from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
-
-
-def projected_area(d_i, d_j):
-    """Transfer area of a pair of diameters d_i, d_j: ``A_p = pi d^2 / 4`` of the smaller one.
-
-    weigler-thermal-dem.md section 4 uses ``A_p = pi d_p^2 / 4`` for monodisperse beds (the PFC
-    script takes the first ball's radius); for unequal sizes drumheat takes the smaller one, the
-    neck of the heat bridge.
-    """
-    return 0.25 * jnp.pi * jnp.minimum(d_i, d_j) ** 2
 
 
 def pair_area(particles: ThermalParticles, i: Array, j: Array) -> Array:
@@ -27,7 +19,18 @@ def pair_area(particles: ThermalParticles, i: Array, j: Array) -> Array:
     return projected_area(particles.diameter[i], particles.diameter[j])
 
 
-class ContactConduction(eqx.Module):
+def schluender_coefficients(ctx: EffectContext):
+    """(alpha_wp, alpha_pp) of Schluender's model (weigler eqs. [2.8]-[2.10]) for the contact
+    gas and the mean particle diameter of the context (thesis App. A3)."""
+    g = ctx.contact_gas
+    return schluender.contact_coefficients(ctx.mean_diameter, T=g.temperature, p=g.pressure,
+                                           conductivity=g.conductivity,
+                                           heat_capacity=g.heat_capacity,
+                                           molar_mass=g.molar_mass, C=g.accommodation_constant)
+
+
+@register("contact")
+class ContactConduction(AbstractEffect):
     """Heat flow through particle-particle contacts: ``alpha_pp A_p (T_j - T_i)`` per contact.
 
     weigler-thermal-dem.md eq. [2.7] (the thermal pipe of eqs. [2.5], [2.6] reduces to this,
@@ -52,8 +55,18 @@ class ContactConduction(eqx.Module):
         q = self.conductance(particles, net) * (T[net.pair_j] - T[net.pair_i])
         return jnp.zeros_like(T).at[net.pair_i].add(q).at[net.pair_j].add(-q)
 
-    def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork) -> Array:
+    def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork,
+                        T: Array | None = None) -> Array:
         """Sum of the conductances at each particle, W/K (for the stability limit [2.2])."""
         g = self.conductance(particles, net)
         n = particles.diameter.shape[0]
         return jnp.zeros(n).at[net.pair_i].add(g).at[net.pair_j].add(g)
+
+    @classmethod
+    def from_table(cls, table: TableValues, ctx: EffectContext) -> "ContactConduction":
+        """``[heat.contact]``: alpha as given (model "constant") or Schluender's alpha_pp."""
+        if table.table.model == "constant":
+            alpha = table.alpha
+        else:
+            alpha = schluender_coefficients(ctx)[1]
+        return cls(alpha=jnp.asarray(alpha, float))

@@ -48,6 +48,7 @@ from jax import Array
 from drumheat.models import air
 from drumheat.models import convection as corr
 from drumheat.models.sphere_conduction import internal_transient_nu
+from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
 
@@ -109,7 +110,8 @@ def series_with_transient_sphere(alpha_a, d, lam_p, rho_c_p, t_end):
     return corr.series_coefficient(alpha_i, alpha_a)
 
 
-class Convection(eqx.Module):
+@register("convection")
+class Convection(AbstractEffect):
     """Convection between each particle and a gas of uniform temperature (module docstring).
 
     Attributes
@@ -122,9 +124,9 @@ class Convection(eqx.Module):
     gas_constants : (rho, cp, lam, nu) arrays or None
         Constant gas properties (``properties = "gas"``); None for the air polynomials.
     porosity, loosening_velocity, loosening_porosity : arrays or None.
+    T_bounds : array (2,)
+        Lowest and highest temperature the run can reach, K (for the conductance bound).
     correlation : str (static).
-    T_bound : float (static)
-        Highest particle temperature the run can reach (for the conductance bound).
     """
 
     gas_temperature: Array
@@ -134,10 +136,10 @@ class Convection(eqx.Module):
     porosity: Optional[Array]
     loosening_velocity: Array
     loosening_porosity: Array
+    T_bounds: Array  # (lowest, highest) temperature the run can reach, K (an array leaf, so
+    # that variants with other gas temperatures share the module's structure)
     correlation: str = eqx.field(static=True)
-    T_bounds: tuple = eqx.field(static=True, default=(273.15, 1273.15))
     account: ClassVar[str | None] = "gas"
-    state_dependent: ClassVar[bool] = True
 
     def alpha(self, T: Array, particles: ThermalParticles) -> Array:
         """alpha of each particle, W/(m2 K), at surface temperatures ``T`` (N,)."""
@@ -156,6 +158,11 @@ class Convection(eqx.Module):
         """Heat flow into each particle, W, shape (N,)."""
         return self.conductance(T, particles) * (self.gas_temperature - T)
 
+    @classmethod
+    def from_table(cls, table: TableValues, ctx: EffectContext):
+        """``[heat.convection]`` (see :func:`_from_table`)."""
+        return _from_table(table, ctx)
+
     def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork, T=None) -> Array:
         """``alpha pi d^2`` of each particle, W/K; without ``T`` the largest value over the
         temperatures the run can reach (a bound for the stability limit)."""
@@ -167,7 +174,7 @@ class Convection(eqx.Module):
         return jnp.max(g, axis=0)
 
 
-class PlugFlowConvection(eqx.Module):
+class PlugFlowConvection(AbstractEffect):
     """Convection to a gas in plug flow through a bed of layers (motion model ``fluidized``).
 
     fluidized-bed-exercise.md section 4 applied layer by layer: the gas enters layer k at
@@ -196,7 +203,11 @@ class PlugFlowConvection(eqx.Module):
     layer: Array
     n_layers: int = eqx.field(static=True)
     account: ClassVar[str | None] = "gas"
-    state_dependent: ClassVar[bool] = True
+
+    @classmethod
+    def from_table(cls, table: TableValues, ctx: EffectContext) -> "PlugFlowConvection":
+        """See :meth:`Convection.from_table` (a context with ``plug_flow``)."""
+        return Convection.from_table(table, ctx)
 
     def _layers(self, T, particles):
         G = self.convection.conductance(T, particles)
@@ -231,85 +242,70 @@ class PlugFlowConvection(eqx.Module):
         return self.convection.conductance_sum(particles, net, T)
 
 
-def build_convection(scene, value, particles: ThermalParticles, T_bounds) -> Convection:
-    """The :class:`Convection` of ``scene`` (``[heat.convection]``, ``[gas]``).
-
-    ``T_bounds`` = (lowest, highest) temperature the run can reach; used to warn once when the
-    air polynomials would be clamped and to bound the film-temperature conductance.
-    """
-    from drumheat.materials import gas as gas_lib
-
-    cfg = scene.heat.convection
-    Tg = jnp.asarray(value("gas.temperature"), float)
-    has = lambda key: scene.get(key) is not None
-    velocity = value("heat.convection.velocity") if has("heat.convection.velocity") else 0.0
-    if scene.motion.model == "granulator" and not has("heat.convection.velocity"):
-        g = scene.granulator
-        velocity = 0.8 * jnp.pi * value("granulator.disc_diameter") * value(
-            "granulator.disc_speed") / 60.0  # staltner [4.1]
+def _from_table(table: TableValues, ctx: EffectContext):
+    """:meth:`Convection.from_table` (module docstring): the correlation's alpha at the gas
+    temperature (or at the film temperature during the run), optionally in series with the
+    transient internal coefficient; wrapped in :class:`PlugFlowConvection` when the context's
+    gas passes the bed in plug flow."""
+    cfg = table.table
+    gas = ctx.gas
+    Tg = jnp.asarray(gas.temperature, float)
+    if table.given("velocity"):
+        velocity = table.velocity
+    else:  # the motion's relative velocity (granulator droplet, staltner [4.1]) or none
+        velocity = ctx.gas_velocity if ctx.gas_velocity is not None else 0.0
     velocity = jnp.asarray(velocity, float)
-    porosity = jnp.asarray(value("heat.convection.porosity"), float) if has(
-        "heat.convection.porosity") else None
-    uL = jnp.asarray(value("heat.convection.loosening_velocity"), float)
-    psiL = jnp.asarray(value("heat.convection.loosening_porosity"), float)
+    porosity = jnp.asarray(table.porosity, float) if table.given("porosity") else None
+    uL = jnp.asarray(table.loosening_velocity, float)
+    psiL = jnp.asarray(table.loosening_porosity, float)
     gas_constants = None
     if cfg.properties == "gas":
-        lib = gas_lib(scene.gas.material)
-        cp = value("gas.heat_capacity") if has("gas.heat_capacity") else lib.heat_capacity
-        lam = value("gas.conductivity") if has("gas.conductivity") else lib.conductivity
-        rho = value("gas.density") if has("gas.density") else (
-            value("gas.pressure") * lib.molar_mass / (8314.0 * Tg))
-        nu = value("gas.kinematic_viscosity")
-        gas_constants = tuple(jnp.asarray(x, float) for x in (rho, cp, lam, nu))
+        rho = gas.density if gas.density is not None else (
+            gas.pressure * gas.molar_mass / (8314.0 * Tg))
+        gas_constants = tuple(jnp.asarray(x, float) for x in (
+            rho, gas.heat_capacity, gas.conductivity, gas.kinematic_viscosity))
     film = cfg.property_temperature == "film"
+    T_bounds = ctx.temperature_bounds
     if cfg.properties == "polynomial" and cfg.correlation != "constant":
-        lo, hi = (0.5 * (T_bounds[0] + float(scene.gas.temperature)),
-                  0.5 * (T_bounds[1] + float(scene.gas.temperature))) if film else (
-            float(scene.gas.temperature),) * 2
+        Tg0 = float(Tg)
+        lo, hi = (0.5 * (T_bounds[0] + Tg0), 0.5 * (T_bounds[1] + Tg0)) if film else (Tg0,) * 2
         if lo < air.T_MIN or hi > air.T_MAX:
-            warnings.warn(f"scene {scene.name!r}: [heat.convection] air properties at "
+            warnings.warn(f"scene {ctx.name!r}: [heat.convection] air properties at "
                           f"{lo:.1f}-{hi:.1f} K lie outside the validity range 273.15-1273.15 K "
                           "of the staltner Table 4.6 fits; they are clamped to it",
-                          UserWarning, stacklevel=3)
-    conv = Convection(Tg, velocity, None, gas_constants, porosity, uL, psiL, cfg.correlation,
-                      tuple(float(x) for x in T_bounds))
+                          UserWarning, stacklevel=4)
+    particles = ctx.particles
+    conv = Convection(Tg, velocity, None, gas_constants, porosity, uL, psiL,
+                      jnp.asarray([float(x) for x in T_bounds]), cfg.correlation)
     if cfg.correlation == "constant":
-        alpha = jnp.asarray(value("heat.convection.alpha"), float)
+        alpha = jnp.asarray(table.alpha, float)
     elif not film:
         alpha = conv.alpha(jnp.broadcast_to(Tg, particles.diameter.shape), particles)
     else:
         alpha = None
     if cfg.internal_resistance == "transient-sphere":
-        from drumheat.assemble import group_index, group_property
-
-        gi = group_index(scene)
-        lam_p = jnp.stack([jnp.asarray(group_property(scene, value, k, "conductivity"), float)
-                           for k in range(len(scene.groups))])[gi]
+        lam_p = ctx.particle_property("conductivity")
         rho_c = particles.capacity / (jnp.pi * particles.diameter**3 / 6.0)
         a_ext = alpha if alpha is not None else conv.alpha(
             jnp.broadcast_to(Tg, particles.diameter.shape), particles)
         alpha = series_with_transient_sphere(a_ext, particles.diameter, lam_p, rho_c,
-                                             value("run.duration"))
+                                             ctx.duration)
     conv = eqx.tree_at(lambda c: c.alpha_value, conv, alpha, is_leaf=lambda x: x is None)
-    if scene.motion.model == "fluidized":
-        return plug_flow(scene, value, particles, conv)
+    if ctx.plug_flow is not None:
+        return plug_flow(conv, ctx.plug_flow, particles)
     return conv
 
 
-def plug_flow(scene, value, particles, conv) -> PlugFlowConvection:
-    """Wrap ``conv`` for gas in plug flow through the bed (motion model ``fluidized``).
+def plug_flow(conv: Convection, flow, particles: ThermalParticles) -> PlugFlowConvection:
+    """Wrap ``conv`` for gas in plug flow through the bed (fluidized-bed-exercise.md section 4).
 
-    The simulated particles stand for the bed cross-section ``f = sum(m_i) / m_1`` (loading m_1,
-    fluidized-bed-exercise.md section 4), through which ``mdot_2 f`` of gas flows; c_p of the gas
-    from ``gas.heat_capacity`` or the library. Layers are assigned in turn (0, 1, ..., L-1, 0,
-    ...); the motion model re-draws them.
+    The simulated particles stand for the bed cross-section ``f = sum(m_i) / m_1`` (loading
+    m_1), through which ``mdot_2 f`` of gas flows: capacity rate ``W = mdot_2 f c_p``.
+    ``flow`` is the context's :class:`~drumheat.thermal.effect.PlugFlow`. Layers are assigned
+    in turn (0, 1, ..., L-1, 0, ...); the motion model re-draws them.
     """
-    from drumheat.materials import gas as gas_lib
-
-    f = jnp.sum(particles.mass) / value("motion.loading")
-    cp = value("gas.heat_capacity") if scene.gas.heat_capacity is not None else gas_lib(
-        scene.gas.material).heat_capacity
-    W = value("gas.mass_flux") * f * cp
-    L = scene.motion.layers
+    f = jnp.sum(particles.mass) / flow.loading
+    W = flow.mass_flux * f * flow.heat_capacity
+    L = flow.n_layers
     layer = jnp.arange(particles.diameter.shape[0]) % L
     return PlugFlowConvection(conv, jnp.asarray(W, float), layer, L)

@@ -120,7 +120,6 @@ class InternalConduction(eqx.Module):
     dt: float | None = eqx.field(static=True, default=None)
     on_unstable: str = eqx.field(static=True, default="refuse")
     newton_iters: int = eqx.field(static=True, default=3)
-    role: ClassVar[str] = "state"
 
     @property
     def n_shells(self) -> int:
@@ -154,29 +153,26 @@ class InternalConduction(eqx.Module):
         return shells.stored_enthalpy(T, self.grid, self.material)
 
 
-def build_internal(scene, value, particles) -> InternalConduction:
-    """The :class:`InternalConduction` of ``scene`` (materials per group, shells from the scene)."""
-    from drumheat.assemble import group_index, group_property
-
-    cfg = scene.heat.internal
+def build_internal(table, ctx) -> InternalConduction:
+    """The :class:`InternalConduction` of a ``[heat.internal]`` table (a
+    :class:`~drumheat.thermal.effect.TableValues` view): shells from the table, the material
+    "constant" from the particles (density, c) and their conductivity, or "staltner-slag"."""
+    cfg = table.table
+    particles = ctx.particles
     grid = shells.make_grid(0.5 * particles.diameter, cfg.shells)
+    rho = particles.mass / (jnp.pi * particles.diameter**3 / 6.0)
     if cfg.material == "staltner-slag":
-        material = staltner_slag(value("heat.internal.liquid_conductivity"),
-                                 value("heat.internal.plateau_temperature"))
-        if any(g.density is not None for g in scene.groups):
-            material = eqx.tree_at(lambda m: m.density, material,
-                                   particles.mass / (jnp.pi * particles.diameter**3 / 6.0))
+        material = staltner_slag(table.liquid_conductivity, table.plateau_temperature)
+        if ctx.density_given:
+            material = eqx.tree_at(lambda m: m.density, material, rho)
     else:
-        gi = group_index(scene)
-        lam = jnp.stack([jnp.asarray(group_property(scene, value, k, "conductivity"), float)
-                         for k in range(len(scene.groups))])[gi]
-        rho = particles.mass / (jnp.pi * particles.diameter**3 / 6.0)
-        material = shells.ConstantMaterial(rho, lam, particles.heat_capacity)
+        material = shells.ConstantMaterial(rho, ctx.particle_property("conductivity"),
+                                           particles.heat_capacity)
     if cfg.latent_heat is not None:
         material = shells.LatentHeatMaterial(
-            material, jnp.asarray(value("heat.internal.latent_heat"), float),
-            jnp.asarray(value("heat.internal.melting_temperature"), float),
-            jnp.asarray(value("heat.internal.melting_width"), float))
+            material, jnp.asarray(table.latent_heat, float),
+            jnp.asarray(table.melting_temperature, float),
+            jnp.asarray(table.melting_width, float))
     return InternalConduction(grid, material, cfg.scheme, cfg.dt, cfg.on_unstable,
                               cfg.newton_iters)
 
@@ -186,18 +182,12 @@ def build_internal(scene, value, particles) -> InternalConduction:
 # ---------------------------------------------------------------------------------------------
 
 
-def _slope(effect, particles, net, Ts):
-    if getattr(effect, "state_dependent", False):
-        return effect.conductance_sum(particles, net, Ts)
-    return effect.conductance_sum(particles, net)
-
-
 def surface_exchange(model, net, Ts):
     """Heat flow of every effect into each particle's surface (W) and its diagonal slope (W/K).
 
     Returns a list of ``(account, q (N,), D (N,))``, one entry per effect.
     """
-    return [(e.account, e.heat_flow(Ts, model.particles, net), _slope(e, model.particles, net, Ts))
+    return [(e.account, e.heat_flow(Ts, model.particles, net), e.conductance_sum(model.particles, net, Ts))
             for e in model.effects]
 
 
@@ -286,28 +276,31 @@ class ShellStepError(ValueError):
     """An explicit shell step above its stability limit was asked for."""
 
 
-def plan_step(model, net, T0, duration=None):
+def plan_step(model, net, T0, duration=None, default_dt=None):
     """Scheme and step of a run: ``(scheme, dt)`` (concrete), refusing an unstable explicit step.
 
-    Default dt: explicit scheme 0.9 times its limit at the start; implicit scheme (stable at any
-    dt, so dt is an accuracy choice) 0.05 times the lumped surface time constant
-    ``min_i m_i c_i / sum(alpha A)_i`` (internal modes faster than that are damped correctly by
-    backward Euler), at most ``duration / 20``; set ``heat.internal.dt`` to resolve fast
-    surface transients. ``"explicit"`` with dt above the limit: :class:`ShellStepError` with the
-    numbers (``on_unstable = "refuse"``) or the implicit scheme with a warning
-    (``on_unstable = "implicit"``).
+    The step is ``heat.internal.dt`` when given, else ``default_dt`` when given (a motion model's
+    own choice, e.g. a granulator phase in ``steps_per_phase`` steps), else: explicit scheme 0.9
+    times its limit at the start; implicit scheme (stable at any dt, so dt is an accuracy choice)
+    0.05 times the lumped surface time constant ``min_i m_i c_i / sum(alpha A)_i`` (internal
+    modes faster than that are damped correctly by backward Euler), at most ``duration / 20``;
+    set ``heat.internal.dt`` to resolve fast surface transients. ``"explicit"`` with dt above
+    the limit: :class:`ShellStepError` with the numbers (``on_unstable = "refuse"``) or the
+    implicit scheme with a warning (``on_unstable = "implicit"``).
     """
     it = model.internal
     try:
         limit_arr, nodes = stability_limit(model, net, jnp.asarray(T0, float))
         limit = float(limit_arr)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError, TypeError):
-        if it.dt is None:
+        if it.dt is None and default_dt is None:
             raise ShellStepError("[heat.internal] needs dt when its values are traced "
                                  "(calibration); set heat.internal.dt") from None
-        return it.scheme, float(it.dt)
+        return it.scheme, float(it.dt if it.dt is not None else default_dt)
     if it.dt is not None:
         dt = float(it.dt)
+    elif default_dt is not None:
+        dt = float(default_dt)
     else:
         if it.scheme == "explicit":
             dt = 0.9 * limit

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import jax.numpy as jnp
 from jax import Array
 
+from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
 
 
-class HeatLoss(eqx.Module):
+@register("loss")
+class HeatLoss(AbstractEffect):
     """Heat flow from the gas into each particle: ``(alpha A)_WK (T_g - T_i)``.
 
     weigler-thermal-dem.md eq. [2.7]: the loss term lumps convection to the gas, radiation and
@@ -35,6 +36,13 @@ class HeatLoss(eqx.Module):
         """Heat flow into each particle, W, shape (N,)."""
         return self.alphaA * (self.gas_temperature - T)
 
-    def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork) -> Array:
+    def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork,
+                        T: Array | None = None) -> Array:
         """(alpha A)_WK of each particle, W/K."""
         return jnp.broadcast_to(self.alphaA, particles.diameter.shape)
+
+    @classmethod
+    def from_table(cls, table: TableValues, ctx: EffectContext) -> "HeatLoss":
+        """``[heat.loss]`` with the gas temperature of ``[gas]``."""
+        return cls(alphaA=jnp.asarray(table.alphaA, float),
+                   gas_temperature=jnp.asarray(ctx.gas.temperature, float))

@@ -28,13 +28,15 @@ import jax.numpy as jnp
 from jax import Array
 
 from drumheat.models import view_factors as vf
+from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
 
 SIGMA = vf.SIGMA
 
 
-class Radiation(eqx.Module):
+@register("radiation")
+class Radiation(AbstractEffect):
     """Particle-to-enclosure radiation (module docstring).
 
     Attributes
@@ -48,7 +50,6 @@ class Radiation(eqx.Module):
     sink_temperature: Array
     T_max: Array
     account: ClassVar[str | None] = "radiation"
-    state_dependent: ClassVar[bool] = True
 
     def heat_flow(self, T: Array, particles: ThermalParticles, net: ContactNetwork) -> Array:
         """Heat flow into each particle, W, shape (N,)."""
@@ -59,6 +60,22 @@ class Radiation(eqx.Module):
         """``4 eps sigma A T^3`` (W/K): the slope of the outgoing flow."""
         T = self.T_max if T is None else T
         return 4.0 * self.emissivity * SIGMA * jnp.pi * particles.diameter**2 * T**3
+
+    @classmethod
+    def from_table(cls, table: TableValues, ctx: EffectContext) -> "Radiation":
+        """``[heat.radiation]``: the particles' emissivities (the table's or the groups'),
+        the sink temperature (enclosure "sink") or the context's enclosure temperature
+        (enclosure "granulator", at the droplet's start position)."""
+        N = ctx.particles.diameter.shape[0]
+        if table.given("emissivity"):
+            eps = jnp.full(N, jnp.asarray(table.emissivity, float))
+        else:
+            eps = ctx.particle_property("emissivity")
+        if table.table.enclosure == "sink":
+            T_rad = jnp.full(N, jnp.asarray(table.sink_temperature, float))
+        else:
+            T_rad = jnp.broadcast_to(jnp.asarray(ctx.sink_temperature, float), (N,))
+        return cls(eps, T_rad, jnp.asarray(float(ctx.temperature_bounds[1]), float))
 
 
 def granulator_sink_temperature(rho, z, granulator, surfaces, particle_emissivity):
@@ -92,26 +109,3 @@ def granulator_sink_temperature(rho, z, granulator, surfaces, particle_emissivit
     import jax
 
     return jax.vmap(one)(flat).reshape(phi.shape[:-1])
-
-
-def build_radiation(scene, value, particles: ThermalParticles, T_bounds) -> Radiation:
-    """The :class:`Radiation` of ``scene``; for the granulator, T_rad at the disc centre."""
-    from drumheat.assemble import group_index, group_property
-
-    cfg = scene.heat.radiation
-    N = particles.diameter.shape[0]
-    if cfg.emissivity is not None:
-        eps = jnp.full(N, jnp.asarray(value("heat.radiation.emissivity"), float))
-    else:
-        gi = group_index(scene)
-        eps = jnp.stack([jnp.asarray(group_property(scene, value, k, "emissivity"), float)
-                         for k in range(len(scene.groups))])[gi]
-    if cfg.enclosure == "sink":
-        T_rad = jnp.full(N, jnp.asarray(value("heat.radiation.sink_temperature"), float))
-    else:
-        from drumheat.motion.granulator import path_geometry
-
-        z_disc = path_geometry(scene.granulator)["z_disc"]
-        T_rad = jnp.full(N, granulator_sink_temperature(0.0, z_disc, scene.granulator,
-                                                        cfg.surfaces, float(eps[0])))
-    return Radiation(eps, T_rad, jnp.asarray(float(T_bounds[1]), float))

@@ -8,11 +8,14 @@ import equinox as eqx
 import jax.numpy as jnp
 from jax import Array
 
+from drumheat.thermal.contact import schluender_coefficients
+from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
 
 
-class WallConduction(eqx.Module):
+@register("wall")
+class WallConduction(AbstractEffect):
     """Heat flow from walls into touching particles: ``alpha_wp A_p (T_w - T_i)`` per contact.
 
     weigler-thermal-dem.md eq. [2.7], with ``A_p = pi d^2 / 4`` of the particle.
@@ -43,12 +46,15 @@ class WallConduction(eqx.Module):
             return ("wall",)
         return tuple(f"wall:{s}" for s in self.surfaces)
 
-    def account_flows(self, q_slots: Array, net: ContactNetwork) -> dict[str, Array]:
-        """Heat flow from each wall (W, by account) from the per-slot flows ``q_slots``."""
+    def flows(self, T: Array, particles: ThermalParticles, net: ContactNetwork
+              ) -> tuple[Array, dict[str, Array]]:
+        """Heat flow into each particle (W) and from each wall account (W)."""
+        q_slots = self.slot_flows(T, particles, net)
+        q = jnp.zeros_like(T).at[net.wall_particle].add(q_slots)
         if self.surfaces is None:
-            return {"wall": jnp.sum(q_slots)}
+            return q, {"wall": jnp.sum(q_slots)}
         per = _per_wall(q_slots, net, len(self.surfaces))
-        return {a: per[k] for k, a in enumerate(self.accounts)}
+        return q, {a: per[k] for k, a in enumerate(self.accounts)}
 
     def slot_flows(self, T: Array, particles: ThermalParticles, net: ContactNetwork) -> Array:
         """Heat flow through every wall-contact slot into its particle, W."""
@@ -64,10 +70,23 @@ class WallConduction(eqx.Module):
         q = self.slot_flows(T, particles, net)
         return jnp.zeros_like(T).at[net.wall_particle].add(q)
 
-    def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork) -> Array:
+    def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork,
+                        T: Array | None = None) -> Array:
         """Sum of wall conductances at each particle, W/K."""
         return jnp.zeros(particles.diameter.shape[0]).at[net.wall_particle].add(
             self.conductance(particles, net))
+
+    @classmethod
+    def from_table(cls, table: TableValues, ctx: EffectContext) -> "WallConduction":
+        """``[heat.wall]``: alpha as given (model "constant") or Schluender's alpha_wp; the
+        wall temperatures and surface names from the context."""
+        if table.table.model == "constant":
+            alpha = table.alpha
+        else:
+            alpha = schluender_coefficients(ctx)[0]
+        return cls(alpha=jnp.asarray(alpha, float),
+                   wall_temperature=jnp.atleast_1d(jnp.asarray(ctx.wall_temperatures, float)),
+                   surfaces=ctx.wall_surfaces)
 
     def heat_flow_by_wall(self, T: Array, particles: ThermalParticles, net: ContactNetwork,
                           n_walls: int) -> Array:

@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from drumheat.models import penetration as _pm
+from drumheat.mechanics.analysis import count_interfraction_contacts  # noqa: F401
 
 __all__ = [
     "alpha_overall",
@@ -683,47 +684,6 @@ def mixing_index(positions, is_tracer, cell_size, origin=None, min_per_cell=1):
         return math.nan
     S2 = np.sum(n_c * (k_c / n_c - p) ** 2) / N
     return float((sigma0 - S2) / (sigma0 - sigmaR))
-
-
-def count_interfraction_contacts(pairs_i, pairs_j, mask, group, fractions=None):
-    """Number of contacts between particles of different fractions.
-
-    The mechanical-mixing experiment of the thesis (weigler-thermal-dem.md, section 11.2)
-    counts white-red contacts over time. Each listed pair is counted once: if the contact list
-    holds every contact twice (both directions, as a full jax-md neighbour list does), halve
-    the result or mask one direction (``mask & (pairs_i < pairs_j)``).
-
-    Parameters
-    ----------
-    pairs_i, pairs_j : array_like of int, shape (..., P)
-        Particle indices of the listed pairs (leading axes, e.g. time, are kept). Padding
-        entries may hold any index, also N (jax-md's padding value), if masked out.
-    mask : array_like of bool, shape (..., P) or None
-        True for pairs that are real contacts. None: every pair whose indices are both < N.
-    group : array_like of int, shape (N,)
-        Fraction label of every particle.
-    fractions : tuple (a, b), optional
-        Count only contacts between group a and group b; default: any two different groups.
-
-    Returns
-    -------
-    jax.Array of int, shape (...)
-        Number of inter-fraction contacts.
-    """
-    group = jnp.asarray(group)
-    n = group.shape[0]
-    i = jnp.asarray(pairs_i)
-    j = jnp.asarray(pairs_j)
-    in_range = (i >= 0) & (i < n) & (j >= 0) & (j < n)
-    valid = in_range if mask is None else (jnp.asarray(mask).astype(bool) & in_range)
-    gi = group[jnp.clip(i, 0, n - 1)]
-    gj = group[jnp.clip(j, 0, n - 1)]
-    if fractions is None:
-        between = gi != gj
-    else:
-        a, b = fractions
-        between = ((gi == a) & (gj == b)) | ((gi == b) & (gj == a))
-    return jnp.sum(valid & between, axis=-1)
 
 
 class MixingTimeFit(NamedTuple):

@@ -3,7 +3,9 @@
 The state is ``{"T": (N,) K, "Q": {account: J}}``: particle temperatures plus the cumulative
 heat received from each outside reservoir, so that every run can report its own energy balance.
 
-Two families:
+Solvers are objects (diffrax style), built once per run by :func:`plan_solver` from the
+``[run]`` choices and the model's stability limit: :class:`Adaptive`, :class:`Explicit` and
+:class:`Shells`, each with ``advance(model, net, y, t0, t1) -> y``. Two families:
 
 * adaptive (diffrax): ``Tsit5`` (explicit Runge-Kutta with error control) or ``Kvaerno5``
   (implicit, for stiff scenes such as very large wall coefficients), tolerances from the scene;
@@ -18,6 +20,7 @@ shell scheme or of the thesis' explicit scheme with its limit enforced
 
 from __future__ import annotations
 
+import abc
 import math
 
 import diffrax
@@ -25,7 +28,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from drumheat.thermal.composer import ThermalModel
+from drumheat.thermal import internal
+from drumheat.thermal.model import ThermalModel
 from drumheat.thermal.network import ContactNetwork
 
 
@@ -124,8 +128,6 @@ def check_explicit_step(model: ThermalModel, net: ContactNetwork, dt: float | No
 
 @eqx.filter_jit
 def _shell_scan(model, net, y, h, n_steps: int, scheme: str):
-    from drumheat.thermal import internal
-
     step = internal.implicit_step if scheme == "implicit" else internal.explicit_step
 
     def body(y, _):
@@ -146,3 +148,96 @@ def advance_shells(model: ThermalModel, net: ContactNetwork, y, t0: float, t1: f
     """
     n, h = explicit_steps(t0, t1, dt)
     return _shell_scan(model, net, y, jnp.asarray(h, float), n, scheme)
+
+
+# ---------------------------------------------------------------------------------------------
+# solvers as objects
+# ---------------------------------------------------------------------------------------------
+
+
+class AbstractThermalSolver(eqx.Module):
+    """Advances the thermal state ``y`` over ``[t0, t1]`` on a fixed contact network."""
+
+    @abc.abstractmethod
+    def advance(self, model: ThermalModel, net: ContactNetwork, y, t0, t1):
+        """The state at ``t1`` from the state ``y`` at ``t0``."""
+
+    def with_autodiff(self, mode: str) -> "AbstractThermalSolver":
+        """This solver supporting differentiation mode ``mode`` ("reverse" or "forward");
+        fixed-step solvers support both as they are."""
+        return self
+
+
+class Adaptive(AbstractThermalSolver):
+    """diffrax Tsit5 (or Kvaerno5 with ``implicit``) with PID step control.
+
+    ``autodiff`` is the differentiation mode the solve supports: ``"reverse"`` (``jax.grad``)
+    or ``"forward"`` (``jax.jvp`` / ``jax.jacfwd``; cheaper for a few parameters). ``t0`` and
+    ``t1`` may be traced.
+    """
+
+    rtol: float = eqx.field(static=True)
+    atol: float = eqx.field(static=True)
+    implicit: bool = eqx.field(static=True, default=False)
+    autodiff: str = eqx.field(static=True, default="reverse")
+    max_steps: int = eqx.field(static=True, default=100_000)
+
+    def with_autodiff(self, mode: str) -> "Adaptive":
+        return Adaptive(self.rtol, self.atol, self.implicit, mode, self.max_steps)
+
+    def advance(self, model, net, y, t0, t1):
+        return advance_adaptive(model, net, y, jnp.asarray(t0, float), jnp.asarray(t1, float),
+                                self.rtol, self.atol, implicit=self.implicit,
+                                max_steps=self.max_steps, autodiff=self.autodiff)
+
+
+class Explicit(AbstractThermalSolver):
+    """Forward Euler in equal steps no larger than ``dt`` (checked against the stability limit
+    by :func:`plan_solver`); ``t0`` and ``t1`` must be concrete (they fix the step count)."""
+
+    dt: float = eqx.field(static=True)
+
+    def advance(self, model, net, y, t0, t1):
+        return advance_explicit(model, net, y, float(t0), float(t1), self.dt)
+
+
+class Shells(AbstractThermalSolver):
+    """The shell schemes of :mod:`drumheat.thermal.internal` (``scheme`` "implicit" or
+    "explicit") in equal steps no larger than ``dt``; ``t0``, ``t1`` concrete."""
+
+    scheme: str = eqx.field(static=True)
+    dt: float = eqx.field(static=True)
+
+    def advance(self, model, net, y, t0, t1):
+        return advance_shells(model, net, y, float(t0), float(t1), self.dt, self.scheme)
+
+
+def plan_solver(kind: str, model: ThermalModel, net: ContactNetwork, T0, t_span: float, *,
+                rtol: float = 1e-8, atol: float = 1e-6, dt: float | None = None,
+                autodiff: str = "reverse") -> AbstractThermalSolver:
+    """The solver of a run: ``kind`` "adaptive", "implicit" or "explicit" (``[run] solver``);
+    particles with shells always get :class:`Shells`.
+
+    The explicit step is ``dt`` if below the stability limit, else refused; without ``dt``
+    half the limit. Where the model's values are traced (a fit) the limit cannot be read:
+    the explicit step is then ``dt`` as given (or one step per call when none is given).
+
+    Raises
+    ------
+    ThermalStabilityError
+        For an explicit ``dt`` above the limit (weigler eq. [2.2]).
+    drumheat.thermal.internal.ShellStepError
+        For a shell step the scheme cannot take (:func:`drumheat.thermal.internal.plan_step`).
+    """
+    if model.internal is not None:
+        scheme, h = internal.plan_step(model, net, initial_state(model, T0)["T"], t_span)
+        return Shells(scheme, h)
+    if kind == "explicit":
+        try:
+            limit = float(model.stability_limit(net))
+        except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError,
+                TypeError):
+            return Explicit(dt if dt is not None else math.inf)
+        del limit  # concrete: check_explicit_step reads it again with the numbers
+        return Explicit(check_explicit_step(model, net, dt))
+    return Adaptive(rtol, atol, implicit=kind == "implicit", autodiff=autodiff)

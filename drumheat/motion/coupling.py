@@ -1,0 +1,154 @@
+"""The heat coupling of a DEM run: contact times accumulated every step, a thermal step every
+``[dem] thermal_substeps`` steps (weigler-thermal-dem.md eq. [2.7], section 6.1).
+
+:func:`make_thermal_update` is the ``extra_update`` hook of :func:`drumheat.mechanics.make_dem`
+that the DEM-based motion models (``dem``, ``moving_bed``) plug in; its state lives in the
+DEM state's ``extra`` (:func:`initial_extra`): temperatures ``T``, heat accounts ``Q``, the
+thermal model's array leaves ``model`` (so that parameters travel in the state and an ensemble
+vmaps over them), contact-time accumulators aligned with the neighbour pairs (``pair_data``,
+carried across neighbour-list rebuilds like the tangential springs) and per particle-wall slot,
+and the contact time summed over the current output interval (``count``).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from drumheat.thermal.model import ThermalModel
+from drumheat.thermal.network import ContactNetwork
+
+__all__ = ["thermal_network", "make_thermal_update", "initial_extra", "reset_record",
+           "reset_count"]
+
+
+def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
+                    wall_ids=None) -> ContactNetwork:
+    """Contact network of one thermal step from accumulated contact times.
+
+    Parameters
+    ----------
+    idx : int array (2, M)
+        Neighbour pairs (padding index ``n``).
+    pair_time : array (M,)
+        Time each pair touched during the thermal step, s.
+    wall_time : array (n * n_walls,)
+        Time each (particle, wall primitive) touched, s, row-major.
+    wall_heated : bool array (n_walls,)
+        Primitives that exchange heat (they carry a temperature).
+    h : float
+        Thermal step, s; weights are contact-time fractions ``time / h``.
+    wall_ids : int array (n_walls,), optional
+        Wall id (index into the wall effect's temperatures) of each primitive; default 0 for
+        all (a drum whose only heated wall is the shell).
+    """
+    valid = idx[0] < n
+    i = jnp.where(valid, idx[0], 0)
+    j = jnp.where(valid, idx[1], 0)
+    w_pair = jnp.where(valid, pair_time / h, 0.0)
+    wp = jnp.repeat(jnp.arange(n), n_walls)
+    wk = jnp.tile(jnp.arange(n_walls), n)
+    w_wall = wall_time / h * wall_heated[wk]
+    wid = jnp.zeros_like(wp) if wall_ids is None else jnp.asarray(wall_ids, wp.dtype)[wk]
+    return ContactNetwork(i, j, w_pair, wp, wid, w_wall)
+
+
+def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
+                        dt: float, batch_axis: str | None = None, wall_ids=None,
+                        per_wall: bool = False):
+    """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
+
+    The ``extra`` state (:func:`initial_extra`) is a dict with ``T`` (N,) K, ``Q`` {account:
+    J}, ``model`` (the array leaves of a thermal model with the structure of ``model``,
+    ``eqx.partition(m, eqx.is_array)[0]``: the thermal parameters are part of the state, so a
+    ``vmap`` over states runs variants with different parameters), ``k`` (steps since the last
+    thermal step), ``wall_time`` and ``rec_wall_time`` (N * n_walls,) s, ``pair_data`` =
+    {"time", "rec_time"} (M,) s aligned with the neighbour pairs (the integrator carries
+    ``extra["pair_data"]`` across rebuilds like the tangential springs) and ``count`` =
+    {"pair", "wall"}: the contact time of all particle pairs and of all particle-heated-wall
+    contacts since :func:`reset_count`, s. ``batch_axis`` names the vmap axis of an ensemble:
+    the thermal sub-step then stays a real ``lax.cond`` (all members count the same steps).
+
+    ``wall_ids`` (n_walls,) gives each wall primitive's wall id (see :func:`thermal_network`).
+    ``per_wall``: every primitive is its own wall (``wall_ids = 0..n_walls-1``) and ``extra``
+    also carries ``Q_walls`` (n_walls,) J, the heat each wall primitive gave to the particles
+    (see :func:`initial_extra`).
+    """
+    h = substeps * dt
+    heated = jnp.asarray(wall_heated, bool)
+    skeleton = eqx.partition(model, eqx.is_array)[1]
+    if per_wall and wall_ids is None:
+        wall_ids = np.arange(n_walls, dtype=np.int32)
+
+    slot_heated = jnp.tile(heated, n).astype(jnp.float64)
+
+    def model_of(extra):
+        return eqx.combine(extra["model"], skeleton)
+
+    def thermal_step(extra, idx):
+        net = thermal_network(idx, n, extra["pair_data"]["time"], extra["wall_time"], heated,
+                              n_walls, h, wall_ids)
+        m = model_of(extra)
+        q, ext = m.heat_flows(extra["T"], net)
+        out = {}
+        if per_wall:
+            wall_effect = m.effect("wall")
+            qw = (wall_effect.heat_flow_by_wall(extra["T"], m.particles, net, n_walls)
+                  if wall_effect is not None else jnp.zeros(n_walls))
+            out["Q_walls"] = extra["Q_walls"] + h * qw
+        T = extra["T"] + h * q / m.particles.capacity
+        Q = {a: extra["Q"][a] + h * ext[a] if a in ext else extra["Q"][a] for a in extra["Q"]}
+        pair = dict(extra["pair_data"], time=jnp.zeros_like(extra["pair_data"]["time"]))
+        return dict(extra, T=T, Q=Q, k=jnp.zeros_like(extra["k"]), pair_data=pair,
+                    wall_time=jnp.zeros_like(extra["wall_time"]), **out)
+
+    def update(extra, state, contacts, dt_):
+        pm = contacts.pair_mask.astype(jnp.float64) * dt
+        wm = contacts.wall_mask.astype(jnp.float64) * dt
+        pair = {"time": extra["pair_data"]["time"] + pm,
+                "rec_time": extra["pair_data"]["rec_time"] + pm}
+        count = {"pair": extra["count"]["pair"] + jnp.sum(pm),
+                 "wall": extra["count"]["wall"] + jnp.sum(wm * slot_heated)}
+        extra = dict(extra, pair_data=pair, wall_time=extra["wall_time"] + wm,
+                     rec_wall_time=extra["rec_wall_time"] + wm, k=extra["k"] + 1, count=count)
+        if substeps == 1:
+            return thermal_step(extra, state.nbrs.idx)
+        go = extra["k"] >= substeps
+        if batch_axis is not None:
+            go = jax.lax.psum(go.astype(jnp.int32), batch_axis) > 0
+        return jax.lax.cond(go, thermal_step, lambda e, _: e, extra,
+                            state.nbrs.idx)
+
+    return update
+
+
+def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
+                  per_wall: bool = False, accounts=()) -> dict:
+    """The thermal part of the DEM state at t = 0.
+
+    ``per_wall`` adds the per-primitive heat ``Q_walls`` (n_walls,) J; ``accounts`` adds
+    further heat accounts (J, zero at t = 0) that an open boundary books into ``Q`` (e.g. the
+    enthalpy carried in by recycled particles).
+    """
+    z = jnp.zeros(n * n_walls)
+    Q = {a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)}
+    out = {"T": jnp.asarray(T0, float), "Q": Q, "model": eqx.partition(model, eqx.is_array)[0],
+           "k": jnp.asarray(0, jnp.int32), "wall_time": z, "rec_wall_time": z,
+           "pair_data": {"time": jnp.zeros(capacity), "rec_time": jnp.zeros(capacity)},
+           "count": {"pair": jnp.zeros(()), "wall": jnp.zeros(())}}
+    if per_wall:
+        out["Q_walls"] = jnp.zeros(n_walls)
+    return out
+
+
+def reset_record(extra):
+    """``extra`` with the contact-time accumulators of the recording set to zero."""
+    pair = dict(extra["pair_data"], rec_time=jnp.zeros_like(extra["pair_data"]["rec_time"]))
+    return dict(extra, pair_data=pair, rec_wall_time=jnp.zeros_like(extra["rec_wall_time"]))
+
+
+def reset_count(extra):
+    """``extra`` with the contact time summed over the output interval set to zero."""
+    return dict(extra, count={k: jnp.zeros_like(v) for k, v in extra["count"].items()})

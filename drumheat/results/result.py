@@ -1,0 +1,140 @@
+"""A finished run: :class:`Result` with its time series, energy balance and summary.
+
+``drumheat.run`` hands back a :class:`Result`; ``Result.save`` writes the result files of
+DESIGN.md (:mod:`drumheat.results.files`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from drumheat.motion.trajectory import Trajectory
+from drumheat.results import observe
+from drumheat.results.files import write_results
+from drumheat.scene import Scene
+
+__all__ = ["Result", "make_result", "build_timeseries", "energy_balance"]
+
+
+@dataclass
+class Result:
+    """A finished run.
+
+    Attributes
+    ----------
+    scene : Scene
+    trajectory : Trajectory
+        Particle temperatures (and positions) at the output times.
+    timeseries : pandas.DataFrame
+        Columns ``t`` (s), ``T_mean`` (K, mass-weighted), ``T_mean:<group>``, ``T_min``,
+        ``T_max`` and, as the scene calls for, ``Q_wall`` (J received from walls since t = 0;
+        a drum with internals adds ``Q_wall:shell``, ``Q_wall:inner``, ``Q_wall:plates``),
+        ``Q_loss`` (J lost to the gas since t = 0) and ``alpha_overall`` (W/(m2 K), eq. [1.10]).
+    summary : dict
+        What ``summary.json`` holds.
+    """
+
+    scene: Scene
+    trajectory: Trajectory
+    timeseries: pd.DataFrame
+    summary: dict
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.trajectory.t
+
+    @property
+    def T(self) -> np.ndarray:
+        return self.trajectory.T
+
+    def save(self, out_dir: str | Path | None = None, figures: bool = True) -> Path:
+        """Write the result files (see DESIGN.md) to ``out_dir`` (default results/<scene>)."""
+        return write_results(self, out_dir, figures=figures)
+
+
+def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
+    """Energy book-keeping: stored-heat change minus heat received, and its relative error.
+
+    Returns ``(residual_J (n_out,), rel_error)`` where ``residual = sum_i m_i c_i (T_i(t) -
+    T_i(0)) - sum_accounts Q(t)`` and ``rel_error = max |residual| / scale`` with
+    ``scale = sum_i m_i c_i |T_i(0) - T_mean(0)| + max |Q_account|`` (the heat that moved inside
+    the bed plus the heat exchanged with the outside). Where the trajectory carries
+    ``stored_heat`` (particles with radial shells) the stored-heat change is taken from it.
+    """
+    if traj.stored_heat is not None:  # particles with shells: from the shell enthalpies
+        stored = np.asarray(traj.stored_heat, float)
+    else:
+        stored = (traj.T - traj.T[0]) @ traj.capacity
+    received = sum(traj.Q.values()) if traj.Q else np.zeros_like(stored)
+    residual = stored - received
+    T0 = traj.T[0]
+    scale = float(np.sum(traj.capacity * np.abs(T0 - np.average(T0, weights=traj.capacity))))
+    scale += sum(float(np.max(np.abs(q))) for q in traj.Q.values())
+    rel = float(np.max(np.abs(residual)) / scale) if scale > 0 else float(np.max(np.abs(residual)))
+    return residual, rel
+
+
+def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
+    """The time-series table of a run (columns as in :class:`Result`)."""
+    cols = {"t": traj.t, "T_mean": traj.T @ traj.mass / traj.mass.sum()}
+    for k, g in enumerate(scene.groups):
+        m = traj.group == k
+        cols[f"T_mean:{g.name}"] = traj.T[:, m] @ traj.mass[m] / traj.mass[m].sum()
+    cols["T_min"], cols["T_max"] = traj.T.min(axis=1), traj.T.max(axis=1)
+    if "wall" in traj.Q:
+        cols["Q_wall"] = traj.Q["wall"]
+    surfaces = sorted(a for a in traj.Q if a.startswith("wall:"))
+    if surfaces:  # a drum with internals: the total here, each surface (Q_wall:<surface>) below
+        cols["Q_wall"] = sum(traj.Q[a] for a in surfaces)
+    if "wall" in traj.Q and scene.drum is not None and scene.drum.wall_temperature is not None:
+        T_cap = traj.T @ traj.capacity / traj.capacity.sum()
+        cols["alpha_overall"] = np.asarray(observe.alpha_overall(
+            traj.t, T_cap, scene.drum.wall_temperature, T_cap[0], traj.capacity.sum(),
+            traj.wall_area))
+    if "gas" in traj.Q:
+        cols["Q_loss"] = -traj.Q["gas"]
+    for account in sorted(set(traj.Q) - {"wall", "gas"}):
+        cols[f"Q_{account}"] = traj.Q[account]  # heat received from it since t = 0, J
+    for name, values in traj.extra.items():
+        cols[name] = values
+    return pd.DataFrame(cols)
+
+
+def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
+    """A :class:`Result` from a finished trajectory: time series, energy balance, summary.
+
+    Parameters
+    ----------
+    scene : Scene
+    traj : Trajectory
+    wall_time : float
+        Wall-clock time of the run, s (goes into the summary).
+
+    Raises
+    ------
+    FloatingPointError
+        If a temperature became NaN or Inf.
+    """
+    ts = build_timeseries(scene, traj)
+    _, rel = energy_balance(traj)
+    if not np.all(np.isfinite(traj.T)):
+        raise FloatingPointError(f"scene {scene.name!r}: temperatures became NaN/Inf; "
+                                 "reduce run.dt or use run.solver = 'implicit'")
+    summary = {
+        "scene": scene.name,
+        "n_particles": int(scene.n_particles),
+        "duration_s": float(traj.t[-1] - traj.t[0]),
+        "wall_time_s": round(wall_time, 3),
+        "energy_balance_rel_error": rel,
+        "effects": list(scene.heat.effects()),
+        "motion": scene.motion.model,
+        "n_contacts": float(np.mean(traj.n_contacts)),
+        "n_wall_contacts": float(np.mean(traj.n_wall_contacts)),
+    }
+    summary.update({k: float(v) for k, v in ts.iloc[-1].items() if k != "t"})
+    summary.update(traj.info)  # the motion model's further results (phase table, ...)
+    return Result(scene, traj, ts, summary)
