@@ -10,7 +10,8 @@
 * Two semi-infinite bodies in contact: staltner-slag-particle.md section 3, Phase 2
   ([3.10]-[3.11], [4.2], [4.10]): effusivity ``b = sqrt(lambda c rho)`` and the
   time-independent contact temperature; the flux of a semi-infinite body follows the
-  penetration law of weigler-thermal-dem.md [1.11]-[1.12].
+  penetration law of weigler-thermal-dem.md [1.11]-[1.12]; the thesis' literal Phase-2
+  boundary (contact temperature one cell outside the sphere, [5.31]-[5.32]) as a surface flux.
 * The transient internal coefficient of a cooling sphere of fluidized-bed-exercise.md
   section 5 (Nu_i with the corrected Nu_i0 denominator).
 """
@@ -32,6 +33,7 @@ __all__ = [
     "contact_temperature",
     "semi_infinite_contact_flux",
     "semi_infinite_contact_heat",
+    "ghost_node_contact_flux",
     "internal_transient_nu",
 ]
 
@@ -165,6 +167,33 @@ def semi_infinite_contact_heat(T1, b1, T2, b2, t):
     sqrt(t/pi)``, the mean coefficient ``2 b/sqrt(pi t)`` of weigler-thermal-dem.md [1.12].
     """
     return 2.0 * b1 * b2 / (b1 + b2) * (jnp.asarray(T1) - T2) * jnp.sqrt(jnp.asarray(t) / jnp.pi)
+
+
+def ghost_node_contact_flux(T_s, T_m, lam_s, lam_m, radius, dr):
+    """Phase-2 wall flux of the thesis' literal contact boundary, W/m^2 on the sphere surface.
+
+    staltner-slag-particle.md section 3, Phase 2 ([5.31]-[5.32] and the digest note): the source
+    stores the contact temperature T_m in node n+1, one cell *outside* the sphere, and updates
+    the surface node n with the interior stencil [5.32], whose east term
+    ``M~_n a_E,n (T_m - T_n)`` with ``a_E,n = (lam_n + lam_{n+1})(2 r_n + dr)^2`` and
+    ``M~_n = dt/(8 dr^2 r_n^2 c rho)`` [5.14] is the conduction through the face at
+    ``R + dr/2`` with the arithmetic-mean conductivity ([5.7] corrected) over the distance dr.
+    Written per unit of the surface area 4 pi R^2 (so that a flux boundary of a finite-volume
+    scheme removes the same heat flow):
+
+        q = ((R + dr/2)/R)^2 (lam_s + lam_m)/2 (T_s - T_m)/dr
+
+    The reading amounts to a contact resistance of one cell between the surface node and the
+    wall; it vanishes as dr -> 0, as does the difference to holding node n at T_m.
+
+    Parameters
+    ----------
+    T_s : surface-node temperature, K. T_m : contact temperature (:func:`contact_temperature`), K.
+    lam_s, lam_m : slag conductivity at T_s and at T_m (lambda_{n+1}), W/(m K).
+    radius : sphere radius R, m. dr : node spacing R/(n - 1/2), m.
+    """
+    area = ((radius + 0.5 * dr) / radius) ** 2
+    return area * 0.5 * (lam_s + lam_m) * (jnp.asarray(T_s) - T_m) / dr
 
 
 def internal_transient_nu(Bi, Fo, a_star=6.0, b=0.4, nu_inf=2.0 * jnp.pi**2 / 3.0):

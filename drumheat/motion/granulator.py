@@ -12,8 +12,10 @@ n_Dt`` [4.1] and
    angles, section 4 T_rad);
 2. **rests on the wall** (Phase 2): convection and radiation off, the surface node held at the
    contact temperature of two semi-infinite bodies ``T_m = T_4 + b_S/(b_S + b_W)(T_s^0 - T_4)``
-   ([3.10]-[3.11], [5.29]-[5.32]; b_S at the surface temperature when contact begins, node n held
-   at T_m: the digest's consistent reading), until the droplet's mean enthalpy has fallen by
+   ([3.10]-[3.11], [5.29]-[5.32]; b_S at the surface temperature when contact begins;
+   ``granulator.contact_mode`` "surface": node n held at T_m, the digest's consistent reading;
+   "ghost": T_m one cell outside the sphere, the thesis' literal reading, see
+   :class:`GhostContact`), until the droplet's mean enthalpy has fallen by
    ``Q_W / m_S`` ([4.8], [4.9]: enthalpy-matched contact time; the crossing is found step by step
    and interpolated linearly between the two steps around it);
 3. **falls** to the bed (Phase 3, ``t_3 = s_3 / v_S``), as Phase 1.
@@ -45,7 +47,8 @@ import numpy as np
 
 from drumheat import assemble
 from drumheat.models.granulator import droplet_speed, path_geometry, wall_heat_per_mass
-from drumheat.models.sphere_conduction import contact_temperature, effusivity
+from drumheat.models.sphere_conduction import (contact_temperature, effusivity,
+                                               ghost_node_contact_flux)
 from drumheat.motion.base import AbstractMotion, register
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene, SceneError
@@ -55,6 +58,28 @@ from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.radiation import granulator_sink_temperature
 
 PHASES = ("flight", "wall contact", "fall")
+
+
+class GhostContact(eqx.Module):
+    """Phase-2 boundary with the contact temperature one cell outside the sphere (issue 20).
+
+    ``granulator.contact_mode = "ghost"``: the thesis stores T_m in node n+1 and updates the
+    surface node with the interior stencil ([5.31]-[5.32], staltner-slag-particle.md section 3,
+    digest note). The explicit scheme takes this literally
+    (``shells.FixedSurfaceTemperature(mode="ghost")``); the implicit finite-volume scheme gets the
+    same east-face heat flow as a surface flux,
+    :func:`drumheat.models.sphere_conduction.ghost_node_contact_flux` (``q_out(T_s)``, the form
+    every shell boundary with a ``flux`` method has).
+    """
+
+    T_m: jax.Array  # (N,) K
+    radius: jax.Array  # (N,) m
+    dr: jax.Array  # (N,) m
+    material: eqx.Module
+
+    def flux(self, Ts):
+        return ghost_node_contact_flux(Ts, self.T_m, self.material.conductivity(Ts),
+                                       self.material.conductivity(self.T_m), self.radius, self.dr)
 
 
 @eqx.filter_jit
@@ -250,7 +275,16 @@ class GranulatorParticle(AbstractMotion):
         t_est = math.pi * (dh * rho * R / 3.0 / (2.0 * b_eff * float(Ts0[0] - g.wall_temperature))) ** 2
         dt = it.dt if it.dt is not None else t_est / g.steps_per_phase
         scheme = it.scheme
-        boundary = shells.FixedSurfaceTemperature(T_m, mode="surface")
+        # granulator.contact_mode (issue 20): "surface" holds node n at T_m; "ghost" puts T_m
+        # one cell outside (explicit: the thesis stencil [5.32]; implicit: the same face flux)
+        def contact_boundary(scheme):
+            if g.contact_mode == "surface":
+                return shells.FixedSurfaceTemperature(T_m, mode="surface")
+            if scheme == "explicit":
+                return shells.FixedSurfaceTemperature(T_m, mode="ghost")
+            return GhostContact(T_m, grid.radius, grid.dr, mat)
+
+        boundary = contact_boundary(scheme)
         if scheme == "explicit":
             lim = float(jnp.min(shells.explicit_stability_limit(T, grid, mat, boundary)))
             if dt > lim:
@@ -259,6 +293,7 @@ class GranulatorParticle(AbstractMotion):
                                      f"explicit shell step dt = {dt:.4g} s exceeds the Phase-2 "
                                      f"stability limit {lim:.4g} s ([A.2], [A.4])", self.scene.name)
                 scheme = "implicit"
+                boundary = contact_boundary(scheme)
         n = 2 * g.steps_per_phase
         for _ in range(200):
             Ts = np.asarray(_contact_scan(T, jnp.asarray(dt), n, grid, mat, boundary, scheme))

@@ -412,9 +412,17 @@ class GranulatorConfig(Table):
     wall_density: float = spec(7800.0, unit="kg/m3", gt=0, doc="Steel wall, Tab. 4.7.")
     wall_heat_capacity: float = spec(500.0, unit="J/(kg K)", gt=0, doc="Steel wall, Tab. 4.7.")
     wall_conductivity: float = spec(50.0, unit="W/(m K)", gt=0, doc="Steel wall, Tab. 4.7.")
-    contact_mode: str = spec("surface", choices=("surface",),
-                             doc="Phase-2 Dirichlet boundary: node n held at the contact "
-                                 "temperature T_m (the digest's consistent reading).")
+    # contact_mode "ghost" added for issue 20 (staltner-coffee branch): the thesis' literal
+    # Phase-2 boundary, staltner-slag-particle.md section 3 digest note ("provide both").
+    contact_mode: str = spec("surface", choices=("surface", "ghost"),
+                             doc="Phase-2 wall-contact boundary (staltner-slag-particle.md "
+                                 "section 3): 'surface' holds the surface node n at the contact "
+                                 "temperature T_m (the digest's consistent reading); 'ghost' "
+                                 "puts T_m in a node n+1 one cell outside the sphere and updates "
+                                 "node n with the interior stencil [5.31]-[5.32] (the thesis' "
+                                 "literal reading: a contact resistance of one cell). Both "
+                                 "converge to the same contact time as the shells are refined, "
+                                 "from below ('surface') and from above ('ghost').")
     segments: int = spec(20, ge=1, doc="Path segments per flight phase; the radiation sink "
                                        "temperature is taken at each segment's midpoint.")
     steps_per_phase: int = spec(400, ge=10, doc="Shell time steps per phase when "
