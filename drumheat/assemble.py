@@ -360,8 +360,14 @@ def initial_packing(scene: Scene) -> Packing:
                              f"{packing.position.shape[1]}D; the scene has {len(group)} in "
                              f"{scene.dim}D", scene.name)
         return Packing(packing.position, diameter, group)
-    return deposit_2d(diameter, group, scene.drum.diameter, seed=scene.run.seed,
-                      arrangement=scene.packing.arrangement)
+    try:
+        return deposit_2d(diameter, group, scene.drum.diameter, seed=scene.run.seed,
+                          arrangement=scene.packing.arrangement)
+    except ValueError as err:
+        raise SceneError("groups", f"{scene.n_particles} particles", f"the geometric "
+                         f"deposition could not place them in the drum ({err}); fewer or "
+                         "smaller particles, a larger drum, or packing.method = 'pour'",
+                         scene.name) from None
 
 
 def drum_packing(scene: Scene, setup: DEMSetup, walls, periodic_length=None) -> np.ndarray:

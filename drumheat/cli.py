@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 import textwrap
+from pathlib import Path
 
 
 def _cmd_scenes(args) -> int:
@@ -23,14 +24,14 @@ def _cmd_scenes(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    from drumheat.results.files import check_out_dir, default_out_dir
+    from drumheat.results.files import default_out_dir
     from drumheat.runner.loop import run
     from drumheat.scene import load_scene
 
     scene = load_scene(args.scene, args.set)
-    out = check_out_dir(args.out if args.out is not None else default_out_dir(scene.name))
-    result = run(scene, progress=not args.quiet)
-    folder = result.save(out)
+    out = Path(args.out) if args.out is not None else default_out_dir(scene.name)
+    result = run(scene, out=out, progress=not args.quiet, resume=args.resume,
+                 allow_long=args.yes)
     s = result.summary
     print(f"{scene.name}: {s['n_particles']} particles, {s['duration_s']:g} s simulated in "
           f"{s['wall_time_s']:.1f} s wall time; energy balance error "
@@ -38,7 +39,7 @@ def _cmd_run(args) -> int:
     for col in result.timeseries.columns:
         if col.startswith("T_mean"):
             print(f"  final {col:<20} {s[col]:.3f} K ({s[col] - 273.15:.3f} degC)")
-    print(f"results in {folder}/")
+    print(f"results in {out}/")
     return 0
 
 
@@ -82,6 +83,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a scene value by its dotted key, e.g. run.duration=600 or "
                         "groups.0.temperature=300 (repeatable)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--yes", action="store_true",
+                   help="run even if the estimate made before the run is above an hour")
+    r.add_argument("--resume", action="store_true",
+                   help="continue the run whose checkpoint is in the result folder (the same "
+                        "scene and overrides)")
     r.set_defaults(func=_cmd_run)
     e = sub.add_parser("explain", help="size of each heat-transfer effect in a scene, and which "
                                        "to drop or add")
@@ -110,6 +116,10 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: exit code of a run stopped early (Ctrl-C) with its results so far and a checkpoint
+EXIT_STOPPED = 3
+
+
 def _fail(message: str) -> int:
     print(textwrap.fill(f"drumheat: error: {message}", width=100, break_on_hyphens=False,
                         break_long_words=False), file=sys.stderr)
@@ -118,14 +128,23 @@ def _fail(message: str) -> int:
 
 def main(argv=None) -> int:
     """Entry point of the ``drumheat`` command; returns the exit code."""
+    from drumheat.mechanics import DEMError
     from drumheat.results.files import ResultFolderError
+    from drumheat.runner.checkpoint import CheckpointError
+    from drumheat.runner.loop import LongRunError, RunStopped
     from drumheat.scene import SceneError
 
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (SceneError, ResultFolderError) as err:
+    except (SceneError, ResultFolderError, CheckpointError, LongRunError) as err:
         return _fail(str(err))
+    except RunStopped as err:
+        print(textwrap.fill(f"drumheat: {err}", width=100, break_on_hyphens=False,
+                            break_long_words=False), file=sys.stderr)
+        return EXIT_STOPPED
+    except DEMError as err:
+        return _fail(f"the DEM run failed: {err}")
     except (FileNotFoundError, IsADirectoryError, PermissionError) as err:
         return _fail(str(err))
     except KeyboardInterrupt:

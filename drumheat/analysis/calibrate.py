@@ -118,7 +118,11 @@ def read_measurements(source: str | Path | pd.DataFrame, scene: Scene,
         if not path.is_file():
             raise CalibrationDataError(f"{label}: no such file {str(path)!r}")
         label = f"{label} ({path.name})" if label == "data" else label
-        df = pd.read_csv(path, comment="#", skipinitialspace=True)
+        try:
+            df = pd.read_csv(path, comment="#", skipinitialspace=True)
+        except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as err:
+            raise CalibrationDataError(f"{label}: cannot be read as a CSV table with a header "
+                                       f"row ({err})") from None
     df.columns = [str(c).strip() for c in df.columns]
     allowed = _allowed_columns(scene)
     if "t" not in df.columns:
@@ -160,11 +164,12 @@ def read_measurements(source: str | Path | pd.DataFrame, scene: Scene,
             "separate experiments")
     for c in temp:
         T = df[c].to_numpy()
-        if np.all(T < CELSIUS_SUSPECT_K):
+        cold = np.flatnonzero(T < CELSIUS_SUSPECT_K)
+        if cold.size:
             raise CalibrationDataError(
-                f"{label}: column {c!r} has all values below {CELSIUS_SUSPECT_K:g} K "
-                f"(max {T.max():g}); these look like degrees Celsius, but temperatures must be "
-                "in kelvin: add 273.15")
+                f"{label}: column {c!r} has values below {CELSIUS_SUSPECT_K:g} K in data rows "
+                f"{(cold + 1).tolist()[:10]} (e.g. {T[cold[0]]:g}); these look like degrees "
+                "Celsius, but temperatures must be in kelvin: add 273.15 (to every row)")
         if np.any(T <= 0):
             raise CalibrationDataError(f"{label}: column {c!r} has temperatures <= 0 K")
     return df[["t"] + temp].reset_index(drop=True)
@@ -532,14 +537,22 @@ def fit(experiments, data=None, params: Sequence[str] | dict | None = None, *,
     bounds = bounds or {}
     trans = []
     for k in keys:
+        _, meta = _field_meta(first, k)
+        if not math.isfinite(x0[k]):
+            raise CalibrationDataError(f"start value {k} = {x0[k]!r} is not a finite number")
+        floor = next(((meta[c], c) for c in ("gt", "ge") if meta.get(c) is not None), None)
         if k in bounds:
             lo, hi = map(float, bounds[k])
+            if floor is not None and (lo < floor[0] or (lo == floor[0] and floor[1] == "gt")):
+                raise CalibrationDataError(
+                    f"bounds of {k} = ({lo:g}, {hi:g}) reach values the scene does not allow "
+                    f"(it must be {'>' if floor[1] == 'gt' else '>='} {floor[0]:g}): a fit must "
+                    "not return a value the scene refuses; raise the lower bound")
             if not lo < x0[k] < hi:
                 raise CalibrationDataError(f"start value {k} = {x0[k]:g} is outside its bounds "
                                            f"({lo:g}, {hi:g})")
             trans.append(_Transform(x0[k], "bounded", lo, hi))
             continue
-        _, meta = _field_meta(first, k)
         positive = (meta.get("gt") is not None and meta["gt"] >= 0) or (
             meta.get("ge") is not None and meta["ge"] >= 0)
         use_log = log.get(k, positive) if isinstance(log, dict) else (

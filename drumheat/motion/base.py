@@ -30,6 +30,7 @@ from __future__ import annotations
 import abc
 from typing import Any, ClassVar
 
+import equinox as eqx
 import jax
 import numpy as np
 
@@ -116,6 +117,38 @@ class AbstractMotion(abc.ABC):
         """The :class:`Trajectory` of a run from its output rows (host arrays), its log and
         its last state."""
 
+    def cost(self, state) -> dict | None:
+        """What the run will cost, for the estimate shown before it starts: a dict with
+        ``seconds`` (estimated wall time) and the step counts, or None where no estimate is
+        made (runs without mechanics are short)."""
+        return None
+
+    # -- checkpoints ------------------------------------------------------------------------
+    def checkpoint_meta(self, state) -> dict:
+        """JSON-serialisable facts of ``state`` that are not array leaves but are needed to
+        rebuild it (e.g. neighbour-list capacities); see :mod:`drumheat.runner.checkpoint`."""
+        return {}
+
+    def save_log(self, log) -> dict:
+        """The host-side log as a (nested) dict of arrays, for a checkpoint."""
+        return {}
+
+    def load_log(self, arrays: dict, log):
+        """The log of a checkpoint: ``log`` (a fresh :meth:`start_log`) with ``arrays`` (what
+        :meth:`save_log` gave) put back."""
+        return log
+
+    def restore_state(self, template, leaves: list, meta: dict, log):
+        """The state of a checkpoint: the array ``leaves`` put onto ``template`` (a fresh
+        :meth:`initial_state`, whose non-array parts are the same); returns ``(state, log)``."""
+        dyn, static = eqx.partition(template, eqx.is_array)
+        treedef = jax.tree_util.tree_structure(dyn)
+        if treedef.num_leaves != len(leaves):
+            raise ValueError(f"the checkpoint holds {len(leaves)} state arrays, the motion model "
+                             f"{self.name!r} builds {treedef.num_leaves}")
+        new = [_like(t, a) for t, a in zip(jax.tree_util.tree_leaves(dyn), leaves)]
+        return eqx.combine(jax.tree_util.tree_unflatten(treedef, new), static), log
+
     def stack_rows(self, rows: list[dict]) -> dict:
         """The rows stacked along a leading output axis (host numpy arrays)."""
         return jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(x) for x in a]), *rows)
@@ -149,6 +182,15 @@ class AbstractMotion(abc.ABC):
         if all(r is None for r in redo):
             return None
         return stack(self.align([s if r is None else r for s, r in zip(starts, redo)]))
+
+
+def _like(template, values):
+    """``values`` as a device array of the template's dtype and weak type (so that a restored
+    state promotes in arithmetic exactly like the original)."""
+    values = np.asarray(values)
+    if np.shape(template) == values.shape:
+        return jax.numpy.asarray(template).at[...].set(values)
+    return jax.numpy.asarray(values, dtype=jax.numpy.asarray(template).dtype)
 
 
 #: ``[motion] model`` -> motion class (filled by :func:`register`)

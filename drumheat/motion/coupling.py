@@ -152,3 +152,22 @@ def reset_record(extra):
 def reset_count(extra):
     """``extra`` with the contact time summed over the output interval set to zero."""
     return dict(extra, count={k: jnp.zeros_like(v) for k, v in extra["count"].items()})
+
+
+def thermal_step_limit(model: ThermalModel, n: int, dim: int, size_ratio: float,
+                       walls_at_once: int) -> float:
+    """A lower bound of the explicit thermal step limit ``min m c / sum(alpha A)`` (weigler
+    eq. [2.2]) over every contact network a DEM bed can form, s.
+
+    Each particle is given the most contacts it can have at once: the kissing number (6 in a
+    monolayer, 12 in 3D) times ``size_ratio^(dim - 1)`` (more, smaller neighbours fit around a
+    large particle; the transfer area uses the smaller diameter, so this over-counts) and
+    ``walls_at_once`` heated wall primitives, all for the whole step. A thermal step below
+    this bound keeps every explicit update a convex combination (the maximum principle).
+    """
+    z = (6 if dim == 2 else 12) * max(1.0, size_ratio) ** (dim - 1)
+    idx = jnp.arange(n, dtype=jnp.int32)
+    # a pair (i, i) of weight w adds 2 w g to particle i: weight z / 2 gives z contacts
+    net = ContactNetwork(idx, idx, jnp.full(n, 0.5 * z), idx, jnp.zeros(n, jnp.int32),
+                         jnp.full(n, float(walls_at_once)))
+    return float(model.stability_limit(net))

@@ -25,8 +25,6 @@ checked after every chunk (an overflow redoes it with larger buffers).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -37,9 +35,10 @@ from drumheat.devices import to_host
 from drumheat.mechanics import DEMError, make_dem
 from drumheat.mechanics.analysis import count_interfraction_contacts
 from drumheat.mechanics.integrator import JIT_OPTIONS
-from drumheat.motion.base import AbstractMotion, register
+from drumheat.motion.base import register
 from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_count,
                                       reset_record)
+from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.replay import Recording
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
@@ -83,6 +82,20 @@ class ContactRecorder:
         self.wall_ptr.append(self.wall_ptr[-1] + len(nz))
         self.positions.append(position)
 
+    @classmethod
+    def from_arrays(cls, a: dict) -> "ContactRecorder":
+        """A recorder holding the recording ``a`` (what :meth:`arrays` gave)."""
+        rec = cls(int(a["n_particles"]), int(a["n_walls"]), float(a["interval"]),
+                  wall_heated=a["wall_heated"], wall_ids=a["wall_ids"], diameter=a["diameter"],
+                  group=a["group"], scene_toml=str(a["scene"]))
+        rec.pair_i, rec.pair_j, rec.pair_dur = [a["pair_i"]], [a["pair_j"]], [a["pair_duration"]]
+        rec.pair_ptr = [int(x) for x in a["pair_ptr"]]
+        rec.wall_p, rec.wall_k, rec.wall_dur = ([a["wall_particle"]], [a["wall_index"]],
+                                                [a["wall_duration"]])
+        rec.wall_ptr = [int(x) for x in a["wall_ptr"]]
+        rec.positions = list(a["positions_full"])
+        return rec
+
     def arrays(self) -> dict:
         """The recording as arrays (the content of ``contacts.npz``)."""
         cat = lambda xs, dt: np.concatenate(xs).astype(dt) if xs else np.zeros(0, dt)  # noqa
@@ -102,7 +115,7 @@ class ContactRecorder:
 
 
 @register
-class DEMBed(AbstractMotion):
+class DEMBed(DEMMotion):
     """A bed moved by DEM in a rotating drum, with heat transfer coupled in the same scan.
 
     Parameters
@@ -165,6 +178,7 @@ class DEMBed(AbstractMotion):
                                             self.n_coupled * sub
                                             + np.arange(1, n_out - self.n_coupled + 1)])
         model, _ = self.model()
+        self.check_thermal_step(model, int(np.sum(self.wall_heated)))
         self._skeleton = eqx.partition(model, eqx.is_array)[1]
         self.dem = self.make_dem(model)
         self._packing = None
@@ -235,13 +249,6 @@ class DEMBed(AbstractMotion):
             return dict(state, T=T, Q=Q, g=g)
         return self.dem.run_steps(self._start(state, t0), self._steps(t0, t1, self.dt))
 
-    def check(self, start, end, attempt=0):
-        if isinstance(end, dict):
-            return None
-        try:
-            return self.dem.check_chunk(start, end, attempt)
-        except DEMError as err:
-            raise type(err)(self._save_last_good(err), err.state) from None
 
     def start_log(self, state, params=None):
         rec = None
@@ -262,6 +269,28 @@ class DEMBed(AbstractMotion):
         if self.n_coupled < len(self.t_out) - 1 and abs(t - self.t_out[self.n_coupled]) < 1e-9:
             state, log = self._switch_to_replay(state, log)
         return state, log
+
+    def save_log(self, log) -> dict:
+        rec = log["recorder"]
+        if rec is None:
+            return {}
+        a = rec.arrays()
+        a["positions_full"] = np.stack([np.asarray(p) for p in rec.positions])  # not float32
+        return {"recorder": a}
+
+    def load_log(self, arrays, log):
+        if "recorder" in arrays:
+            log = dict(log, recorder=ContactRecorder.from_arrays(arrays["recorder"]))
+        return log
+
+    def restore_state(self, template, leaves, meta, log):
+        if meta.get("phase") == "replay":  # after dem.replay_after: rebuild the replay state
+            template, log = self._switch_to_replay(template, log)
+        return super().restore_state(template, leaves, meta, log)
+
+    def checkpoint_meta(self, state) -> dict:
+        return dict(super().checkpoint_meta(state),
+                    phase="replay" if isinstance(state, dict) else "dem")
 
     def _switch_to_replay(self, state, log):
         """Continue by cyclic replay of the last ``replay_cycle`` of the recording."""
@@ -346,17 +375,8 @@ class DEMBed(AbstractMotion):
             counts.append(float(np.asarray(c)))
         return np.array(counts)
 
-    def _save_last_good(self, err) -> str:
-        path = Path(f"{self.scene.name}.last_good_state.npz").resolve()
-        st = err.state
-        if st is not None:
-            arrays = dict(position=np.asarray(st.position), velocity=np.asarray(st.velocity),
-                          time=float(st.time), diameter=self.diameter, group=self.group)
-            if isinstance(st.extra, dict) and "T" in st.extra:
-                arrays["T"] = np.asarray(st.extra["T"])
-            np.savez(path, **arrays)
-            return f"{err} The last good state is saved in {path}."
-        return str(err)
+    def mechanical_steps(self) -> int:
+        return self.n_coupled * self.steps_per_output
 
     # -- ensembles ------------------------------------------------------------------------------
     def not_vmappable(self) -> str | None:

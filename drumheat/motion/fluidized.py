@@ -125,7 +125,7 @@ class FluidizedBed(ThermalBed):
             k = int(np.sum(remix <= a))  # re-mixings before this piece
             if k > 0 and np.any(remix == a):
                 model = self.with_layers(model, state["deals"][k])
-            y = self.solver.advance(model, self.net, y, float(a), float(b))
+            y = self.solve(model, self.net, y, float(a), float(b))
         return dict(state, model=model, y=y)
 
     def observe(self, state) -> dict:

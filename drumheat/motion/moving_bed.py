@@ -57,9 +57,10 @@ import numpy as np
 from drumheat import assemble
 from drumheat.geometry.hopper import HopperGeometry, hopper_walls  # noqa: F401 (re-exported)
 from drumheat.geometry.walls import Plane
-from drumheat.mechanics import DEMError, make_dem
+from drumheat.mechanics import make_dem
 from drumheat.models.moving_bed import BETA_HOPPER, lmtd
-from drumheat.motion.base import AbstractMotion, register
+from drumheat.motion.base import register
+from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_count,
                                       reset_record)
 from drumheat.motion.trajectory import Trajectory
@@ -79,7 +80,7 @@ def _lattice(x_lo, x_hi, y_lo, y_hi, depth, spacing):
 
 
 @register
-class MovingBed(AbstractMotion):
+class MovingBed(DEMMotion):
     """A moving bed discharging through a slit from a hopper with a tube bundle (module
     docstring); DEM and heat in one scan, particles recycled from the slit to the top.
 
@@ -130,6 +131,7 @@ class MovingBed(AbstractMotion):
         self.tube_area = (self.geometry.tube_fraction * math.pi * h.tube_diameter * h.depth)
         self._packing = None
         model, _ = self.model()
+        self.check_thermal_step(model, int(np.sum(self.wall_heated)))
         self._skeleton = eqx.partition(model, eqx.is_array)[1]
         self.dem = self.make_dem(model)
 
@@ -309,12 +311,6 @@ class MovingBed(AbstractMotion):
         start = state._replace(extra=reset_count(reset_record(state.extra)),
                                max_overlap=jnp.zeros_like(state.max_overlap))
         return self.dem.run_steps(start, int(round((t1 - t0) / self.dt)))
-
-    def check(self, start, end, attempt=0):
-        try:
-            return self.dem.check_chunk(start, end, attempt)
-        except DEMError as err:
-            raise DEMError(f"{err} (scene {self.scene.name!r})", err.state) from None
 
     def observe(self, state) -> dict:
         ex = state.extra

@@ -82,10 +82,11 @@ import numpy as np
 
 from drumheat import assemble
 from drumheat.materials import gas as gas_lib
-from drumheat.mechanics import DEMError, make_dem
+from drumheat.mechanics import make_dem
 from drumheat.models import drag as drag_model
 from drumheat.models import moving_bed
-from drumheat.motion.base import AbstractMotion, register
+from drumheat.motion.base import register
+from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
 from drumheat.thermal.convection import (_air_clipped, nusselt_alpha,
@@ -202,7 +203,7 @@ def ascent(d, rho_p, u_gas, rho_g, mu_g, height, v0=0.0, drag_law="schiller_naum
 
 
 @register
-class PneumaticChannel(AbstractMotion):
+class PneumaticChannel(DEMMotion):
     """Particles carried up a vertical channel by gas (module docstring).
 
     The evaluation over the steady window (outlet temperatures, alpha_2, Nu_2, ...) travels in
@@ -601,12 +602,6 @@ class PneumaticChannel(AbstractMotion):
         start = state._replace(extra=dict(state.extra, acc=self._zero_acc()),
                                max_overlap=jnp.zeros_like(state.max_overlap))
         return self.dem.run_steps(start, int(round((t1 - t0) / self.dt)))
-
-    def check(self, start, end, attempt=0):
-        try:
-            return self.dem.check_chunk(start, end, attempt)
-        except DEMError as err:
-            raise DEMError(f"{err} (scene {self.scene.name!r})", err.state) from None
 
     def observe(self, state) -> dict:
         ex = state.extra

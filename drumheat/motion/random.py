@@ -180,7 +180,7 @@ class RandomBed(StaticBed):
                     owner = owner[state["perms"][k - 1]]
                 else:
                     y = {"T": self.mix_to_mean(y["T"], model.particles.capacity), "Q": y["Q"]}
-            y = self.solver.advance(model, self.network(owner, state["contacts"]), y, float(a),
+            y = self.solve(model, self.network(owner, state["contacts"]), y, float(a),
                                     float(b))
         return dict(state, y=y, owner=owner)
 

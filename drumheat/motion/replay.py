@@ -31,7 +31,7 @@ from drumheat import assemble
 from drumheat.motion.base import register
 from drumheat.motion.static import ThermalBed
 from drumheat.motion.trajectory import Trajectory
-from drumheat.scene import Scene
+from drumheat.scene import Scene, SceneError
 from drumheat.thermal.network import ContactNetwork
 
 __all__ = ["Recording", "ReplayBed", "restart_assignment", "read_recording"]
@@ -115,9 +115,7 @@ class Recording:
 
     def network(self, k) -> ContactNetwork:
         """Contact network of interval ``k`` (weights = contact-time fractions)."""
-        i, j, w = (a[k] for a in self.pairs)
-        wp, ww, wid = (a[k] for a in self.walls)
-        return ContactNetwork(i, j, w, wp, wid, ww)
+        return self.net.network(k)
 
     def position_at(self, g: int) -> np.ndarray:
         """Positions at the start of (cyclic) interval ``g``."""
@@ -138,6 +136,12 @@ class RecordedNetwork(eqx.Module):
     tau: float = eqx.field(static=True)
     n_intervals: int = eqx.field(static=True)
 
+    def network(self, k) -> ContactNetwork:
+        """Contact network of interval ``k`` (weights = contact-time fractions)."""
+        i, j, w = (a[k] for a in self.pairs)
+        wp, ww, wid = (a[k] for a in self.walls)
+        return ContactNetwork(i, j, w, wp, wid, ww)
+
     def advance(self, model, T, Q, g, n_steps: int):
         """``n_steps`` explicit steps of one recording interval each from the cyclic interval
         counter ``g``: ``(T, Q, g)`` after them. A step whose counter is a positive multiple
@@ -155,9 +159,7 @@ def _replay_steps(net: RecordedNetwork, model, T, Q, g, n_steps):
         T, Q, g = carry
         k = g % K
         T = jnp.where((k == 0) & (g > 0), T[net.match], T)
-        i, j, w = (a[k] for a in net.pairs)
-        wp, ww, wid = (a[k] for a in net.walls)
-        q, ext = model.heat_flows(T, ContactNetwork(i, j, w, wp, wid, ww))
+        q, ext = model.heat_flows(T, net.network(k))
         return (T + tau * q / C, {a: Q[a] + tau * ext[a] for a in Q}, g + 1), None
 
     return jax.lax.scan(step, (T, Q, g), None, length=n_steps)[0]
@@ -188,6 +190,23 @@ class ReplayBed(ThermalBed):
         self.rec = Recording(raw)
         self.diameter = raw["diameter"]
         self.steps_per_output = int(round(scene.run.output_interval / self.rec.tau))
+        self._check_step(self.model()[0])
+
+    def _check_step(self, model) -> None:
+        """Refuse a recording interval above the explicit thermal limit of its own networks
+        (weigler eq. [2.2]): the replay takes one explicit step per interval."""
+        net = self.rec.net
+        g = jax.vmap(lambda k: model.conductance_sum(net.network(k)))(
+            jnp.arange(net.n_intervals))
+        G = jnp.max(g, axis=0)
+        limit = float(jnp.min(jnp.where(G > 0, model.particles.capacity / jnp.where(
+            G > 0, G, 1.0), jnp.inf)))
+        if self.rec.tau > limit:
+            raise SceneError("replay.file", self.scene.replay.file,
+                             f"its recording interval {self.rec.tau:g} s exceeds the explicit "
+                             f"thermal limit {limit:.3g} s of its contact networks with this "
+                             "scene's coefficients (weigler eq. [2.2]): record with a shorter "
+                             "dem.record_interval or check the coefficients", self.scene.name)
 
     def initial_state(self, params=None):
         model, T0 = self.model(params)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -80,6 +81,39 @@ class ThermalBed(AbstractMotion):
     def shared(self) -> dict:
         return dict(super().shared(), **{"the thermal solver": repr(self.solver)})
 
+    def cost(self, state) -> dict | None:
+        """For runs of many output intervals (each a solver call): the time of one interval,
+        timed after a compiling call, times their number."""
+        import time
+
+        n = len(self.times) - 1
+        if n < 200:
+            return None  # a few hundred solver calls: seconds
+        t0, t1 = float(self.times[0]), float(self.times[1])
+        jax.block_until_ready(self.advance(state, t0, t1))
+        start = time.perf_counter()
+        jax.block_until_ready(self.advance(state, t0, t1))
+        per = time.perf_counter() - start
+        return dict(seconds=n * per, chunks=n, text=f"{n} output intervals of about "
+                    f"{per:.2g} s each", cheaper="fewer outputs (run.output_interval), a shorter "
+                    "run (run.duration)")
+
+    def solve(self, model, net, y, t0, t1):
+        """The run's thermal solver over ``[t0, t1]``; a stiff scene that exhausts the adaptive
+        solver's steps is refused naming ``run.solver`` (diffrax's own message names an
+        argument that is no scene key)."""
+        try:
+            return self.solver.advance(model, net, y, t0, t1)
+        except Exception as err:  # noqa: BLE001 - equinox's runtime error of the solve
+            if "maximum number of solver steps" not in str(err):
+                raise
+            raise SceneError("run.solver", self.scene.run.solver,
+                             "the adaptive solver needed more than "
+                             f"{getattr(self.solver, 'max_steps', 0):,} steps for one output "
+                             "interval: the scene is stiff (large coefficients for small "
+                             "particles); use run.solver = 'implicit' or a shorter "
+                             "run.output_interval", self.scene.name) from None
+
     def observe(self, state) -> dict:
         model, y = state["model"], state["y"]
         if model.internal is None:
@@ -132,8 +166,7 @@ class StaticBed(ThermalBed):
         return {"model": model, "net": self.net, "y": initial_state(model, T0)}
 
     def advance(self, state, t0, t1):
-        return dict(state, y=self.solver.advance(state["model"], state["net"], state["y"],
-                                                 t0, t1))
+        return dict(state, y=self.solve(state["model"], state["net"], state["y"], t0, t1))
 
     def align(self, states):
         n_pairs = max(int(s["net"].pair_i.shape[0]) for s in states)

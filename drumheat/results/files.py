@@ -18,7 +18,9 @@ import fnmatch
 import json
 import os
 import shutil
+import socket
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +34,12 @@ MANIFEST = ".drumheat-files.json"
 _LEGACY_OUTPUTS = ("timeseries.csv", "summary.json", "particles.npz", "scene.toml",
                    "contacts.npz", "phases.csv", "profiles.npz", "channel.json", "*.png",
                    "animation.gif", "animation.mp4", "vtk")
+
+
+#: the lock file of a result folder that a run is writing into
+RUN_LOCK = ".drumheat-run.lock"
+#: the checkpoint of a run (drumheat.runner.checkpoint)
+CHECKPOINT = "checkpoint.npz"
 
 
 class ResultFolderError(ValueError):
@@ -104,6 +112,10 @@ def check_out_dir(out: str | Path) -> Path:
     if target == here or target in here.parents:
         raise ResultFolderError(f"output folder '{out}' is the current folder (or holds it); "
                                 "results go into a folder of their own, e.g. --out results/run1")
+    holder = running_pid(out)
+    if holder is not None:
+        raise ResultFolderError(f"output folder '{out}' is being written by a run that is still "
+                                f"going (process {holder}); wait for it, or choose another --out")
     if out.is_dir() and any(out.iterdir()):
         foreign = foreign_entries(out)
         if foreign is None:
@@ -125,6 +137,25 @@ def check_out_dir(out: str | Path) -> Path:
         raise ResultFolderError(f"output folder '{out}' cannot be written (no permission in "
                                 f"'{parent}'); choose another --out")
     return out
+
+
+def running_pid(folder: Path) -> int | None:
+    """The process id of a run that is writing into ``folder`` now, or None (no lock, or the
+    lock of a run that ended without removing it)."""
+    try:
+        info = json.loads((Path(folder) / RUN_LOCK).read_text())
+    except (OSError, ValueError):
+        return None
+    pid = int(info.get("pid", -1))
+    if info.get("host") != socket.gethostname() or pid <= 0 or pid == os.getpid():
+        return None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:
+        return pid
+    return pid
 
 
 def _list(names: list[str], k: int = 5) -> str:
@@ -166,7 +197,7 @@ def place_folder(tmp: Path, out: Path) -> None:
     if not out.exists():
         tmp.rename(out)
         return
-    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
+    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.drumheat-old-", dir=out.parent))
     old.rmdir()
     out.rename(old)
     try:
@@ -175,6 +206,28 @@ def place_folder(tmp: Path, out: Path) -> None:
         old.rename(out)
         raise
     shutil.rmtree(old, ignore_errors=True)
+
+
+#: a temporary folder of drumheat's beside a result folder older than this (s) is left over
+#: from a write that was killed (SIGKILL) and is removed
+STALE_AFTER_S = 600.0
+
+
+def clean_stale_temporaries(out: Path) -> list[Path]:
+    """Remove drumheat's temporary folders beside ``out`` (``.<name>.drumheat-tmp-*``,
+    ``.<name>.drumheat-old-*``) that a killed write left behind; returns those removed."""
+    out = Path(out)
+    removed = []
+    if not out.parent.is_dir():
+        return removed
+    for p in out.parent.glob(f".{out.name}.drumheat-*"):
+        try:
+            if p.is_dir() and time.time() - p.stat().st_mtime > STALE_AFTER_S:
+                shutil.rmtree(p)
+                removed.append(p)
+        except OSError:
+            pass
+    return removed
 
 
 def write_results(result, out_dir=None, figures: bool = True) -> Path:
@@ -188,7 +241,8 @@ def write_results(result, out_dir=None, figures: bool = True) -> Path:
     out = Path(out_dir) if out_dir is not None else default_out_dir(result.scene.name)
     check_out_dir(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    clean_stale_temporaries(out)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.drumheat-tmp-", dir=out.parent))
     try:
         tmp.chmod(0o777 & ~_umask())  # mkdtemp makes it 0700
         result.timeseries.to_csv(tmp / "timeseries.csv", index=False, float_format="%.10g")
@@ -211,3 +265,189 @@ def write_results(result, out_dir=None, figures: bool = True) -> Path:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# a result folder written as the run goes
+# ---------------------------------------------------------------------------------------------
+
+
+class RunFolder:
+    """The result folder of a run that writes as it goes (DESIGN.md, outside contracts).
+
+    While the run goes, the folder holds ``scene.toml``, ``summary.json`` (``"complete":
+    false``), ``timeseries.csv`` growing row by row (flushed; the columns every run has:
+    ``t``, ``T_mean``, ``T_mean:<group>``, ``T_min``, ``T_max`` and the heat accounts), the
+    latest ``checkpoint.npz`` and a lock (a second run into the same folder is refused). When
+    the run completes, the complete result replaces all of it (:func:`write_results`). A run
+    that stops early (Ctrl-C, an error) leaves what it has, marks the summary incomplete and
+    keeps the checkpoint, from which ``drumheat run ... --resume`` continues.
+
+    An earlier complete result at the output path is moved to ``<name>.previous`` beside it
+    when a new run starts, and deleted when the new run completes: a run that fails never
+    destroys an earlier result.
+
+    Parameters
+    ----------
+    out : path
+    scene : Scene
+    resume : bool
+        Continue the run whose checkpoint is in ``out`` (nothing is moved).
+    mass, group : arrays (N,)
+        Particle masses (kg) and group indices, for the streamed mean temperatures.
+    """
+
+    def __init__(self, out, scene, *, resume: bool = False, mass=None, group=None):
+        self.out = Path(out)
+        self.scene = scene
+        self.mass = None if mass is None else np.asarray(mass, float)
+        self.group = None if group is None else np.asarray(group)
+        self.previous = self.out.with_name(self.out.name + ".previous")
+        self._columns = None
+        check_out_dir(self.out)
+        if resume:
+            if not (self.out / CHECKPOINT).is_file():
+                raise ResultFolderError(f"there is no checkpoint to resume in '{self.out}' "
+                                        f"({CHECKPOINT} is missing); run without --resume")
+        else:
+            self._clear()
+        clean_stale_temporaries(self.out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.out.chmod(0o777 & ~_umask())
+        (self.out / RUN_LOCK).write_text(json.dumps(dict(pid=os.getpid(),
+                                                         host=socket.gethostname(),
+                                                         started=time.time())))
+        if not resume:
+            (self.out / "scene.toml").write_text(scene.to_toml())
+            self.summary({"complete": False, "status": "running"})
+        self._register()
+
+    def _clear(self):
+        """Make room: an earlier complete result goes to ``<name>.previous`` (an older one
+        there is deleted), an incomplete one (a run that stopped) is discarded."""
+        if not self.out.is_dir() or not any(self.out.iterdir()):
+            return
+        complete = _read_json(self.out / "summary.json").get("complete", True)
+        if complete:
+            if self.previous.exists():
+                if foreign_entries(self.previous) not in ([],):
+                    raise ResultFolderError(f"'{self.previous}' (where drumheat keeps the "
+                                            "earlier result while a new one runs) holds files "
+                                            "drumheat did not write; move it away")
+                shutil.rmtree(self.previous)
+            self.out.rename(self.previous)
+        else:
+            shutil.rmtree(self.out)
+
+    def _register(self):
+        names = [p.name for p in self.out.iterdir() if p.name != MANIFEST]
+        _write_manifest(self.out, names)
+
+    # -- while running ------------------------------------------------------------------------
+    def row(self, t: float, row: dict) -> None:
+        """Append one output row to ``timeseries.csv`` (flushed)."""
+        if self.mass is None or "T" not in row:
+            return
+        T = np.asarray(row["T"], float)
+        cols = {"t": float(t), "T_mean": float(T @ self.mass / self.mass.sum())}
+        for k, g in enumerate(self.scene.groups):
+            m = self.group == k
+            cols[f"T_mean:{g.name}"] = float(T[m] @ self.mass[m] / self.mass[m].sum())
+        cols["T_min"], cols["T_max"] = float(T.min()), float(T.max())
+        for a, q in sorted(row.get("Q", {}).items()):
+            q = float(np.asarray(q))
+            cols["Q_loss" if a == "gas" else f"Q_{a}"] = -q if a == "gas" else q
+        path = self.out / "timeseries.csv"
+        if self._columns is None:
+            self._columns = list(cols)
+            path.write_text(",".join(self._columns) + "\n")
+            self._register()
+        with open(path, "a") as fh:
+            fh.write(",".join(f"{cols.get(c, float('nan')):.10g}" for c in self._columns)
+                     + "\n")
+            fh.flush()
+
+    def rows(self, times, rows: list) -> None:
+        """Start ``timeseries.csv`` anew with the rows so far (a resumed run)."""
+        self._columns = None
+        (self.out / "timeseries.csv").unlink(missing_ok=True)
+        for t, r in zip(times, rows):
+            self.row(t, r)
+
+    def summary(self, data: dict) -> None:
+        """Write ``summary.json`` (atomically)."""
+        tmp = self.out / ".summary.json.writing"
+        tmp.write_text(json.dumps(data, indent=2, default=_json_default) + "\n")
+        tmp.replace(self.out / "summary.json")
+
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.out / CHECKPOINT
+
+    # -- the end ------------------------------------------------------------------------------
+    def complete(self, result, figures: bool = True) -> Path:
+        """Replace the running folder by the complete result; delete the earlier one."""
+        self.checkpoint_path.unlink(missing_ok=True)
+        (self.out / RUN_LOCK).unlink(missing_ok=True)
+        self._register()
+        try:
+            write_results(result, self.out, figures=figures)
+        except BaseException:
+            self._release()
+            raise
+        if self.previous.is_dir() and foreign_entries(self.previous) == []:
+            shutil.rmtree(self.previous, ignore_errors=True)
+        return self.out
+
+    def stop(self, summary: dict, times=None, rows=None) -> None:
+        """A run that stopped early: what it has (the summary marked incomplete, the partial
+        particle frames) stays, with its checkpoint; the lock goes."""
+        try:
+            self.summary(summary)
+            if rows:
+                _write_partial_particles(self.out / "particles.npz", times, rows, self.group,
+                                         [g.name for g in self.scene.groups])
+        finally:
+            self._release()
+
+    def discard(self) -> None:
+        """Remove this run's folder (a run refused for bad input found while running) and put
+        an earlier result back in its place."""
+        shutil.rmtree(self.out, ignore_errors=True)
+        if self.previous.is_dir() and not self.out.exists():
+            self.previous.rename(self.out)
+
+    def _release(self):
+        (self.out / RUN_LOCK).unlink(missing_ok=True)
+        self._register()
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"{type(x).__name__} is not JSON serialisable")
+
+
+def _write_partial_particles(path, times, rows, group, group_names):
+    """``particles.npz`` of the rows a stopped run has (``t``, ``T``, ``position``)."""
+    rows = [r for r in rows if "T" in r]
+    if not rows:
+        return
+    arrays = dict(t=np.asarray(times[:len(rows)], float),
+                  T=np.stack([np.asarray(r["T"]) for r in rows]), group=group,
+                  group_names=np.array(group_names))
+    if all("position" in r for r in rows):
+        arrays["position"] = np.stack([np.asarray(r["position"]) for r in rows])
+    tmp = path.with_name(".particles.npz.writing")
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+    os.replace(tmp, path)

@@ -6,12 +6,16 @@ DESIGN.md (:mod:`drumheat.results.files`).
 
 from __future__ import annotations
 
+import sys
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from drumheat._version import __version__
+from drumheat.assemble import temperature_bounds
 from drumheat.motion.trajectory import Trajectory
 from drumheat.results import observe
 from drumheat.results.files import write_results
@@ -104,6 +108,28 @@ def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
+def peak_memory_mb() -> float:
+    """Peak resident memory of this process so far, MB (the operating system's high-water
+    mark: it includes everything the process did before the run)."""
+    import resource
+
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return round(rss / 1024.0 if sys.platform != "darwin" else rss / 1024.0**2, 1)
+
+
+def max_principle(scene: Scene, traj: Trajectory) -> dict:
+    """Whether every temperature of the run stayed between the lowest and highest temperature
+    it can reach (initial, gas, walls, radiating surfaces: the maximum principle of heat
+    conduction); ``{"ok", "lowest", "highest", "bounds"}``. A violation means an unstable or
+    wrong step, which an energy balance cannot see."""
+    lo, hi = temperature_bounds(scene)
+    tol = 1e-9 * max(abs(lo), abs(hi))
+    T = np.asarray(traj.T)
+    lowest, highest = float(np.min(T)), float(np.max(T))
+    return {"ok": bool(lowest >= lo - tol and highest <= hi + tol), "lowest": lowest,
+            "highest": highest, "bounds": [lo, hi]}
+
+
 def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
     """A :class:`Result` from a finished trajectory: time series, energy balance, summary.
 
@@ -126,6 +152,8 @@ def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
                                  "reduce run.dt or use run.solver = 'implicit'")
     summary = {
         "scene": scene.name,
+        "complete": True,
+        "drumheat": __version__,
         "n_particles": int(scene.n_particles),
         "duration_s": float(traj.t[-1] - traj.t[0]),
         "wall_time_s": round(wall_time, 3),
@@ -136,5 +164,12 @@ def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
         "n_wall_contacts": float(np.mean(traj.n_wall_contacts)),
     }
     summary.update({k: float(v) for k, v in ts.iloc[-1].items() if k != "t"})
+    summary["max_principle"] = max_principle(scene, traj)
+    if not summary["max_principle"]["ok"]:
+        warnings.warn(f"scene {scene.name!r}: temperatures left the bounds of the maximum "
+                      f"principle ({summary['max_principle']}): the run is not trustworthy (an "
+                      "unstable step?), even though its energy balance may close",
+                      RuntimeWarning, stacklevel=2)
+    summary["peak_memory_MB"] = peak_memory_mb()
     summary.update(traj.info)  # the motion model's further results (phase table, ...)
     return Result(scene, traj, ts, summary)

@@ -12,6 +12,10 @@ without host-side work, for differentiating a run (:mod:`drumheat.analysis.calib
 
 from __future__ import annotations
 
+import contextlib
+import signal
+import sys
+import threading
 import time
 from pathlib import Path
 
@@ -19,16 +23,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.assemble import group_index, scene_values, thermal_particles
 from drumheat.motion import AbstractMotion, make_motion
 from drumheat.motion.trajectory import Trajectory
-from drumheat.results.files import check_out_dir
+from drumheat.results.files import CHECKPOINT, RunFolder, check_out_dir
 from drumheat.results.result import Result, make_result
+from drumheat.runner.checkpoint import load_checkpoint, save_checkpoint
 from drumheat.runner.compile_cache import enable_compilation_cache
 from drumheat.runner.progress import SimProgress
 from drumheat.runner.sharding import make_mesh, resolve_devices, shard_particles
-from drumheat.scene import Scene, load_scene
+from drumheat.scene import Scene, SceneError, load_scene
 
-__all__ = ["run", "simulate", "trace", "advance_checked", "MAX_REDO"]
+__all__ = ["run", "simulate", "trace", "restore", "estimate", "advance_checked", "MAX_REDO",
+           "RunStopped", "LongRunError", "FolderMonitor"]
 
 #: how often a chunk may be redone (each time with larger buffers) before a run stops
 MAX_REDO = 9
@@ -57,7 +64,8 @@ def output_flags(motion: AbstractMotion) -> np.ndarray:
 
 
 def simulate(motion: AbstractMotion, params: dict | None = None,
-             progress: bool | None = True, mesh=None, return_state: bool = False):
+             progress: bool | None = True, mesh=None, return_state: bool = False,
+             monitor=None, resume: dict | None = None):
     """Run a motion model through all its chunks; the :class:`Trajectory` it makes of it.
 
     Parameters
@@ -71,23 +79,172 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
         Split the state's per-particle arrays over this device mesh.
     return_state : bool
         Return ``(trajectory, final state)`` instead of the trajectory alone.
+    monitor : optional
+        Told of every output row and chunk end (:class:`FolderMonitor`: streamed results,
+        checkpoints, stop requests) and of a failure.
+    resume : dict, optional
+        A checkpoint (:func:`drumheat.runner.checkpoint.load_checkpoint`) to continue from.
     """
-    state = motion.initial_state(params)
+    if resume is None:
+        state = motion.initial_state(params)
+        log = motion.start_log(state, params)
+        rows, i0 = [jax.device_get(motion.observe(state))], 0
+    else:
+        state, log, rows, i0 = restore(motion, resume, params)
     if mesh is not None:
         state = shard_particles(state, mesh, motion.scene.n_particles)
-    log = motion.start_log(state, params)
     is_output = output_flags(motion)
-    rows = [jax.device_get(motion.observe(state))]
     times = motion.times
+    if monitor is not None:
+        monitor.begin(motion, times[is_output], rows)
     with SimProgress(float(times[-1] - times[0]), progress) as bar:
-        for i, (t0, t1) in enumerate(zip(times[:-1], times[1:])):
-            state = advance_checked(motion, state, float(t0), float(t1))
-            if is_output[i + 1]:
-                rows.append(jax.device_get(motion.observe(state)))
-            state, log = motion.between(state, log, float(t1))
-            bar.update_to(float(t1 - times[0]))
+        bar.update_to(float(times[i0] - times[0]))
+        for i in range(i0, len(times) - 1):
+            t0, t1 = float(times[i]), float(times[i + 1])
+            n_rows = len(rows)
+            try:
+                new = advance_checked(motion, state, t0, t1)
+                if is_output[i + 1]:
+                    rows.append(jax.device_get(motion.observe(new)))
+                new, log = motion.between(new, log, t1)
+            except BaseException as err:
+                if monitor is not None:  # the last good state: before this chunk
+                    monitor.failed(motion, i, t0, state, log, rows[:n_rows], err)
+                raise
+            state = new
+            if is_output[i + 1] and monitor is not None:
+                monitor.row(t1, rows[-1])
+            bar.update_to(t1 - float(times[0]))
+            if monitor is not None:
+                monitor.chunk_done(motion, i + 1, t1, state, log, rows)
     traj = motion.finish(rows, log, state)
     return (traj, state) if return_state else traj
+
+
+def restore(motion: AbstractMotion, checkpoint: dict, params=None):
+    """``(state, log, rows, next chunk)`` of a checkpoint, onto a fresh state of ``motion``."""
+    template = motion.initial_state(params)
+    log = motion.load_log(checkpoint["log"], motion.start_log(template, params))
+    state, log = motion.restore_state(template, checkpoint["state"],
+                                      checkpoint["meta"]["state"], log)
+    return state, log, checkpoint["rows"], int(checkpoint["meta"]["chunk"])
+
+
+class LongRunError(ValueError):
+    """A run would take longer than an hour and was not allowed to (``allow_long``)."""
+
+
+#: a run estimated longer than this (s) needs ``allow_long=True`` (``--yes``)
+LONG_RUN_S = 3600.0
+
+
+def _duration_text(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h" if seconds < 172800 else f"{seconds / 86400:.1f} days"
+
+
+def estimate(motion: AbstractMotion, params=None, state=None) -> dict | None:
+    """The cost of a run before it starts (:meth:`AbstractMotion.cost`) with a one-line
+    ``text``; None where the motion model makes no estimate."""
+    cost = motion.cost(motion.initial_state(params) if state is None else state)
+    if cost is None:
+        return None
+    cost = dict(cost)
+    cost["text"] = (f"{motion.scene.name}: {motion.scene.n_particles} particles, {cost['text']}; "
+                    f"estimated wall time {_duration_text(cost['seconds'])} on this machine")
+    return cost
+
+
+def check_cost(cost: dict | None, allow_long: bool) -> None:
+    """Refuse a run estimated above an hour unless allowed, naming the keys that make it
+    cheaper."""
+    if cost is None or allow_long or cost["seconds"] <= LONG_RUN_S:
+        return
+    raise LongRunError(f"{cost['text']}. Runs above an hour need --yes (Python: "
+                       f"allow_long=True). Cheaper: {cost['cheaper']}")
+
+
+class RunStopped(RuntimeError):
+    """A run stopped early on request (Ctrl-C): its results so far and a checkpoint are in its
+    result folder (``drumheat run ... --resume`` continues it)."""
+
+
+#: set by Ctrl-C during a run with a result folder: stop at the next chunk end
+STOP = threading.Event()
+
+
+class FolderMonitor:
+    """Writes a run into its result folder as it goes (:class:`drumheat.results.files.RunFolder`):
+    every output row into ``timeseries.csv``, a checkpoint every ``run.checkpoint_every``
+    seconds of wall-clock time (and every ``run.checkpoint_interval`` of simulated time), and
+    a checkpoint with what the run has when it stops (Ctrl-C) or fails."""
+
+    def __init__(self, folder: RunFolder, scene: Scene, wall_offset: float = 0.0):
+        self.folder, self.scene = folder, scene
+        self.wall_start = time.perf_counter() - wall_offset
+        self.last_wall = time.perf_counter()
+        self.last_sim = None
+        self.out_times = None
+
+    def wall_time(self) -> float:
+        return time.perf_counter() - self.wall_start
+
+    def begin(self, motion, out_times, rows):
+        self.out_times = np.asarray(out_times)
+        self.folder.rows(self.out_times, rows)
+
+    def row(self, t, row):
+        self.folder.row(t, row)
+
+    def checkpoint(self, motion, chunk, t, state, log, rows):
+        save_checkpoint(self.folder.checkpoint_path, scene_toml=self.scene.to_toml(),
+                        motion_name=motion.name, chunk=chunk, time=t, state=state,
+                        state_meta=motion.checkpoint_meta(state),
+                        log_arrays=motion.save_log(log), rows=rows,
+                        extra_meta={"wall_time_s": self.wall_time()})
+        self.last_wall, self.last_sim = time.perf_counter(), t
+        self.folder._register()
+
+    def chunk_done(self, motion, chunk, t, state, log, rows):
+        run = self.scene.run
+        last = len(motion.times) - 1
+        if STOP.is_set() and chunk < last:
+            self.checkpoint(motion, chunk, t, state, log, rows)
+            self._stop("stopped by Ctrl-C", t, rows)
+            raise RunStopped(f"stopped at t = {t:g} s of {run.duration:g} s; the results so far "
+                             f"and a checkpoint are in '{self.folder.out}': continue with "
+                             f"drumheat run ... --out {self.folder.out} --resume")
+        due = (run.checkpoint_every > 0
+               and time.perf_counter() - self.last_wall >= run.checkpoint_every)
+        if run.checkpoint_interval is not None:
+            start = self.last_sim if self.last_sim is not None else float(motion.times[0])
+            due = due or t - start >= run.checkpoint_interval * (1 - 1e-9)
+        if due and chunk < last:
+            self.checkpoint(motion, chunk, t, state, log, rows)
+
+    def failed(self, motion, chunk, t, state, log, rows, err):
+        if isinstance(err, RunStopped):
+            return
+        if isinstance(err, SceneError):  # bad input found during the run: nothing to keep
+            self.folder.discard()
+            return
+        reason = f"{type(err).__name__}: {err}"
+        try:
+            self.checkpoint(motion, chunk, t, state, log, rows)
+        except Exception as ckpt_err:  # noqa: BLE001 - the original error matters more
+            reason += f" (no checkpoint could be written: {ckpt_err})"
+        self._stop(reason, t, rows)
+
+    def _stop(self, reason, t, rows):
+        self.folder.stop({"scene": self.scene.name, "complete": False, "status": reason,
+                          "t_reached_s": float(t), "duration_s": self.scene.run.duration,
+                          "wall_time_s": round(self.wall_time(), 3),
+                          "resume": f"drumheat run {self.scene.name} --out {self.folder.out} "
+                                    "--resume (with the same scene)"},
+                         self.out_times, rows)
 
 
 def trace(motion: AbstractMotion, params: dict | None = None) -> tuple:
@@ -111,7 +268,8 @@ def trace(motion: AbstractMotion, params: dict | None = None) -> tuple:
 
 
 def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None = True,
-        params: dict | None = None, overrides: dict | None = None, devices=None) -> Result:
+        params: dict | None = None, overrides: dict | None = None, devices=None,
+        resume: bool = False, allow_long: bool = False) -> Result:
     """Run a scene and return its :class:`Result`; write result files if ``out`` is given.
 
     Compiled programs are kept in JAX's persistent compilation cache
@@ -123,8 +281,12 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     scene : Scene or str
         A scene, a built-in scene name or a path to a scene file.
     out : path, optional
-        Result folder; checked before the run (:func:`drumheat.results.files.check_out_dir`);
-        nothing is written when None (call ``result.save()`` later).
+        Result folder, written as the run goes (:class:`~drumheat.results.files.RunFolder`:
+        the time series row by row, checkpoints every ``run.checkpoint_every`` seconds, the
+        complete result at the end; an earlier result there is kept until the new one is
+        complete); checked before the run. Nothing is written when None (call
+        ``result.save()`` later). While it runs, Ctrl-C stops the run at the next chunk end
+        with a checkpoint (:class:`RunStopped`).
     progress : bool
         Show a progress bar (it appears only for runs longer than ~2 s).
     params : dict, optional
@@ -141,13 +303,28 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         N = 10 000 and over 100x slower at N = 2 000 than on one (docs/scaling.md). For
         many variants of a scene use :func:`drumheat.run_ensemble`, which splits the
         variants over the devices instead.
+    resume : bool
+        Continue the run whose checkpoint is in ``out``; the scene must be the one that run
+        had (else :class:`~drumheat.runner.checkpoint.CheckpointError`). The results equal
+        those of a run that was not interrupted, bit for bit.
+    allow_long : bool
+        Run even when the estimate made before the run (:func:`estimate`, from a timed
+        warm-up of the DEM) is above an hour; otherwise such a run is refused with
+        :class:`LongRunError`, which names the keys that make it cheaper. With ``progress``
+        the estimate is printed before the run starts.
     """
     enable_compilation_cache()
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
         scene = scene.replace(overrides)
-    if out is not None:
+    checkpoint = None
+    if resume:
+        if out is None:
+            raise ValueError("resume=True needs the result folder (out=) that holds the "
+                             "checkpoint")
+        checkpoint = load_checkpoint(Path(out) / CHECKPOINT, scene.to_toml())
+    elif out is not None:
         check_out_dir(out)  # before the run, not after it
     start = time.perf_counter()
     motion = make_motion(scene)
@@ -158,8 +335,44 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
             raise ValueError(f"motion model {scene.motion.model!r} does not support devices= "
                              "(particle-axis sharding); supported: static, dem")
         mesh = make_mesh(devs)
-    traj = simulate(motion, params, progress, mesh)
-    result = make_result(scene, traj, time.perf_counter() - start)
-    if out is not None:
-        result.save(out)
+    if checkpoint is None:
+        cost = estimate(motion, params)
+        check_cost(cost, allow_long)
+        if cost is not None and progress:
+            print(cost["text"], file=sys.stderr, flush=True)
+    if out is None:
+        traj = simulate(motion, params, progress, mesh)
+        return make_result(scene, traj, time.perf_counter() - start)
+    particles = thermal_particles(scene, scene_values(scene))
+    folder = RunFolder(out, scene, resume=resume, mass=np.asarray(particles.mass),
+                       group=group_index(scene))
+    offset = float(checkpoint["meta"].get("wall_time_s", 0.0)) if checkpoint else 0.0
+    monitor = FolderMonitor(folder, scene, wall_offset=offset)
+    with _stop_on_ctrl_c():
+        traj = simulate(motion, params, progress, mesh, monitor=monitor, resume=checkpoint)
+    result = make_result(scene, traj, monitor.wall_time())
+    folder.complete(result)
     return result
+
+
+@contextlib.contextmanager
+def _stop_on_ctrl_c():
+    """While a run writes into a result folder, the first Ctrl-C asks it to stop at the next
+    chunk end (with a checkpoint); a second one interrupts at once."""
+    STOP.clear()
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        STOP.set()
+        signal.signal(signal.SIGINT, previous)
+        print("\nstopping at the end of this chunk (Ctrl-C again to interrupt at once)",
+              file=sys.stderr, flush=True)
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        STOP.clear()

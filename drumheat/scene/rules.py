@@ -98,20 +98,90 @@ def _check_replay(s) -> None:
     if abs(k - round(k)) > 1e-9 * max(k, 1.0):
         raise SceneError("run.duration", s.run.duration, "must be a multiple of "
                          "run.output_interval for a replay", n)
+    with np.load(scene_path(s, s.replay.file), allow_pickle=False) as f:
+        rec_d = np.asarray(f["diameter"], float) if "diameter" in f.files else None
+        rec_scene = str(f["scene"]) if "scene" in f.files else None
+    if rec_d is not None and (rec_d.shape != (s.n_particles,) or not np.allclose(
+            rec_d, scene_diameters(s), rtol=1e-6)):
+        raise SceneError("replay.file", s.replay.file, "was recorded with particles of other "
+                         f"diameters ({np.unique(rec_d)} m) than the scene's "
+                         f"({np.unique(scene_diameters(s))} m)", n)
+    if rec_scene:
+        import tomllib
+
+        try:
+            groups = tomllib.loads(rec_scene).get("groups", [])
+        except tomllib.TOMLDecodeError:
+            groups = []
+        recorded = [(g.get("count"), g.get("material")) for g in groups]
+        if recorded and recorded != [(g.count, g.material) for g in s.groups]:
+            raise SceneError("replay.file", s.replay.file, "was recorded with other particle "
+                             f"groups (count, material: {recorded}) than the scene's "
+                             f"({[(g.count, g.material) for g in s.groups]})", n)
     span = tau * (len(rec["pair_ptr"]) - 1)
     if s.run.duration > span * (1 + 1e-12) and not s.replay.cyclic:
         raise SceneError("run.duration", s.run.duration, f"exceeds the recording ({span:g} s); "
                          "set replay.cyclic = true or shorten the run", n)
 
 
+def scene_diameters(s) -> np.ndarray:
+    """Nominal diameter of every particle of the scene, group by group, m."""
+    return np.concatenate([np.full(g.count, g.diameter) for g in s.groups])
+
+
 def _check_packing_file(s) -> None:
-    """The packing file of method 'file' exists and holds the scene's particles."""
-    pk = _npz_arrays(s, "packing.file", s.packing.file, "a packing (.npz with the array "
-                     "position)", ("position",))
-    shape = np.shape(pk["position"])
-    if shape != (s.n_particles, s.dim):
-        raise SceneError("packing.file", s.packing.file, f"holds positions of shape {shape}; "
-                         f"the scene has {s.n_particles} particles in {s.dim}D", s.name)
+    """The packing file of method 'file' exists, holds the scene's particles (count, sizes),
+    all inside the drum, and no two of them overlapping by more than half the smaller radius
+    (what a DEM run refuses)."""
+    key, path, n = "packing.file", s.packing.file, s.name
+    pk = _npz_arrays(s, key, path, "a packing (.npz with the array position)", ("position",))
+    pos = np.asarray(pk["position"], float)
+    if pos.shape != (s.n_particles, s.dim):
+        raise SceneError(key, path, f"holds positions of shape {pos.shape}; the scene has "
+                         f"{s.n_particles} particles in {s.dim}D", n)
+    if not np.all(np.isfinite(pos)):
+        raise SceneError(key, path, "holds positions that are not finite numbers", n)
+    d = scene_diameters(s)
+    with np.load(scene_path(s, path), allow_pickle=False) as f:
+        d_file = np.asarray(f["diameter"], float) if "diameter" in f.files else None
+    if d_file is not None and (d_file.shape != d.shape or not np.allclose(d_file, d,
+                                                                           rtol=1e-6)):
+        raise SceneError(key, path, "holds particles of other diameters than the scene's "
+                         f"groups ({np.unique(d_file)} m vs {np.unique(d)} m)", n)
+    if s.drum is not None:
+        r = np.hypot(pos[:, 0], pos[:, 1]) + 0.5 * d
+        worst = int(np.argmax(r - 0.5 * s.drum.diameter))
+        if r[worst] > 0.5 * s.drum.diameter + 0.01 * d[worst]:
+            raise SceneError(key, path, f"particle {worst} lies outside the drum (its surface "
+                             f"{r[worst]:.4g} m from the axis, drum radius "
+                             f"{0.5 * s.drum.diameter:g} m)", n)
+    _check_overlaps(s, key, path, pos, d)
+
+
+def _check_overlaps(s, key, path, pos, d) -> None:
+    from scipy.spatial import cKDTree
+
+    box = None
+    if s.dim == 3 and s.drum is not None and s.drum.depth:
+        pos = pos.copy()
+        pos[:, 2] = np.mod(pos[:, 2], s.drum.depth)
+        box = np.array([np.inf, np.inf, s.drum.depth])
+        box[:2] = 1e9
+        pos[:, :2] += 1e8
+    pairs = np.array(sorted(cKDTree(pos, boxsize=box).query_pairs(float(d.max()))), int)
+    if not len(pairs):
+        return
+    delta = pos[pairs[:, 0]] - pos[pairs[:, 1]]
+    if box is not None:
+        delta[:, 2] -= s.drum.depth * np.round(delta[:, 2] / s.drum.depth)
+    overlap = 0.5 * (d[pairs[:, 0]] + d[pairs[:, 1]]) - np.linalg.norm(delta, axis=1)
+    rel = overlap / (0.5 * np.minimum(d[pairs[:, 0]], d[pairs[:, 1]]))
+    k = int(np.argmax(rel))
+    if rel[k] > 0.5:
+        i, j = pairs[k]
+        raise SceneError(key, path, f"particles {i} and {j} overlap by {rel[k]:.0%} of the "
+                         "smaller radius (a DEM run stops above 50 %); the packing does not "
+                         "belong to this scene", s.name)
 
 
 def group_value(s, k: int, prop: str) -> float:

@@ -33,6 +33,10 @@ __all__ = ["SceneError", "REQUIRED", "spec", "Table", "build_table", "building",
            "did_you_mean"]
 
 
+#: absolute temperatures below this (K) are refused as a likely unit mistake (degC for K)
+MIN_TEMPERATURE = 100.0
+
+
 class _Required:
     def __repr__(self):
         return "REQUIRED"
@@ -192,6 +196,11 @@ def _convert(value, tp, meta, key, scene_name):
     elif tp is bool:
         if not isinstance(value, bool):
             raise SceneError(key, value, allowed, scene_name)
+    if (meta.get("unit") == "K" and key.rsplit(".", 1)[-1].endswith("temperature")
+            and isinstance(value, float) and 0 < value < MIN_TEMPERATURE):
+        raise SceneError(key, value, f"temperatures are in kelvin, and {value:g} K looks like "
+                         f"degrees Celsius ({value:g} degC = {value + 273.15:g} K); "
+                         f"temperatures below {MIN_TEMPERATURE:g} K are refused", scene_name)
     if meta.get("choices") is not None and value not in meta["choices"]:
         raise SceneError(key, value, allowed + did_you_mean(value, meta["choices"]), scene_name)
     for k, ok in (("gt", lambda v, b: v > b), ("ge", lambda v, b: v >= b),

@@ -52,6 +52,15 @@ class RunConfig(Table):
     dt: Optional[float] = spec(None, unit="s", gt=0,
                                doc="Step of the explicit thermal solver; default: 0.5 times "
                                    "its stability limit.")
+    checkpoint_every: float = spec(600.0, unit="s (wall clock)", ge=0,
+                                   doc="A run with a result folder writes a checkpoint there "
+                                       "(checkpoint.npz) after this much wall-clock time since "
+                                       "the last one, so a run killed after hours can continue "
+                                       "with --resume; 0: none (a stopped or failed run still "
+                                       "writes one). Short runs never reach it.")
+    checkpoint_interval: Optional[float] = spec(None, unit="s", gt=0,
+                                                doc="A checkpoint every this much simulated "
+                                                    "time as well (at the next chunk end).")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,134 @@
+"""What the DEM-based motion models (``dem``, ``moving_bed``, ``pneumatic``) share: the checked
+chunk and the checkpoint of a DEM state.
+
+A DEM state's neighbour list carries a few numbers outside its arrays (capacities, the cell
+size); a checkpoint keeps them (:meth:`DEMMotion.checkpoint_meta`) so that the state can be
+rebuilt on a fresh template of another capacity.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import jax
+
+from drumheat.mechanics import DEMError, DEMState
+from drumheat.motion.base import AbstractMotion
+from drumheat.motion.coupling import thermal_step_limit
+from drumheat.scene import SceneError
+
+__all__ = ["DEMMotion", "WARMUP_STEPS"]
+
+#: mechanical steps of the timed warm-up behind a run's cost estimate
+WARMUP_STEPS = 200
+
+#: the static fields of a jax-md neighbour list that a checkpoint keeps
+_NEIGHBOR_STATICS = ("cell_list_capacity", "max_occupancy", "cell_size")
+
+
+class DEMMotion(AbstractMotion):
+    """Base of the motion models whose state is a :class:`~drumheat.mechanics.DEMState`.
+
+    Subclasses set ``self.dem`` (the DEM system of :func:`drumheat.mechanics.make_dem`).
+    """
+
+    dem = None
+
+    def check(self, start, end, attempt=0):
+        """The DEM's host-side check of a chunk (:meth:`drumheat.mechanics.DEM.check_chunk`):
+        a neighbour-buffer overflow redoes it with larger buffers; NaN, escaped particles and
+        excessive overlaps stop the run, naming the scene."""
+        if not isinstance(end, DEMState):
+            return None
+        try:
+            return self.dem.check_chunk(start, end, attempt)
+        except DEMError as err:
+            raise type(err)(f"{err} (scene {self.scene.name!r})", err.state) from None
+
+    def checkpoint_meta(self, state) -> dict:
+        if not isinstance(state, DEMState):
+            return {}
+        def plain(v):  # numpy scalars to JSON numbers
+            return None if v is None else (int(v) if float(v).is_integer() and not
+                                           isinstance(v, float) else float(v))
+
+        return {"neighbors": {k: plain(getattr(state.nbrs, k)) for k in _NEIGHBOR_STATICS}}
+
+    def restore_state(self, template, leaves, meta, log):
+        state, log = super().restore_state(template, leaves, meta, log)
+        if "neighbors" in meta:
+            statics = {k: meta["neighbors"][k] for k in _NEIGHBOR_STATICS}
+            state = state._replace(nbrs=dataclasses.replace(state.nbrs, **statics))
+        return state, log
+
+    def check_thermal_step(self, model, n_heated_walls: int) -> None:
+        """Refuse a coupled thermal step ``dem.thermal_substeps x dt`` above the explicit limit
+        of the densest contact network the bed can form (:func:`drumheat.motion.coupling.
+        thermal_step_limit`): above it the temperatures would oscillate and leave the bounds
+        of the maximum principle while the energy balance still closed."""
+        d = [g.diameter for g in self.scene.groups]
+        limit = thermal_step_limit(model, self.scene.n_particles, self.scene.dim,
+                                   max(d) / min(d), min(n_heated_walls, 3))
+        substeps = self.scene.dem.thermal_substeps
+        h = substeps * self.dt
+        cfg = self.scene.dem
+        if cfg.replay_after is not None and cfg.record_interval > limit:
+            raise SceneError("dem.record_interval", cfg.record_interval,
+                             "the replay after dem.replay_after takes one explicit thermal step "
+                             f"per recording interval; {cfg.record_interval:g} s exceeds the "
+                             f"explicit limit {limit:.3g} s of the densest contact network "
+                             "(weigler eq. [2.2]): record more often or check the coefficients",
+                             self.scene.name)
+        if h <= limit:
+            return
+        if substeps > 1 and self.dt <= limit:
+            raise SceneError("dem.thermal_substeps", substeps,
+                             f"the thermal step {substeps} x {self.dt:.3g} s = {h:.3g} s exceeds "
+                             f"the explicit limit {limit:.3g} s of the densest contact network "
+                             f"(weigler eq. [2.2]); use at most {int(limit // self.dt)}",
+                             self.scene.name)
+        key = "heat.wall.alpha" if self.scene.heat.wall is not None else "heat.contact.alpha"
+        raise SceneError(key, self.scene.get(key) if self.scene.get(key.rsplit(".", 1)[0])
+                         is not None else None,
+                         f"the coefficients make the explicit thermal limit of the densest "
+                         f"contact network {limit:.3g} s (weigler eq. [2.2]), below the "
+                         f"mechanical step {self.dt:.3g} s: no thermal step of this DEM can be "
+                         "stable; check the coefficients (units: W/(m2 K))", self.scene.name)
+
+    # -- cost ---------------------------------------------------------------------------------
+    def mechanical_steps(self) -> int:
+        """Mechanical steps of the whole run (the chunks that run the DEM)."""
+        return int(round((self.times[-1] - self.times[0]) / self.dt))
+
+    def thermal_steps(self) -> int:
+        """Thermal steps of the whole run."""
+        return self.mechanical_steps() // max(1, self.scene.dem.thermal_substeps)
+
+    def cost(self, state) -> dict:
+        """The run's step counts and its wall time estimated from a timed warm-up of
+        :data:`WARMUP_STEPS` steps from ``state`` (after one compiling call), plus the host-side
+        work of a chunk (observation and check) times the number of chunks."""
+        n = self.mechanical_steps()
+        k = max(1, min(WARMUP_STEPS, n))
+        jax.block_until_ready(self.dem.run_steps(state, k))  # compiles
+        t0 = time.perf_counter()
+        end = jax.block_until_ready(self.dem.run_steps(state, k))
+        per_step = (time.perf_counter() - t0) / k
+        t0 = time.perf_counter()
+        jax.device_get(self.observe(end))
+        self.dem._diag(end)
+        per_chunk = time.perf_counter() - t0
+        chunks = len(self.times) - 1
+        return dict(mechanical_steps=n, thermal_steps=self.thermal_steps(), dt=self.dt,
+                    chunks=chunks, seconds=n * per_step + chunks * per_chunk,
+                    seconds_per_step=per_step, warmup_steps=k,
+                    text=f"{n:.3g} mechanical steps of {self.dt:.3g} s and "
+                         f"{self.thermal_steps():.3g} thermal steps (timed warm-up of {k} "
+                         "steps)",
+                    cheaper="softer contacts (dem.stiffness: the step grows as 1/sqrt(k); "
+                            "docs/accuracy-vs-cost.md says what that costs in accuracy), "
+                            "replaying the recorded contacts after a few revolutions "
+                            "(dem.record_interval with dem.replay_after), fewer thermal steps "
+                            "(dem.thermal_substeps), fewer outputs (run.output_interval), a "
+                            "shorter run (run.duration)")

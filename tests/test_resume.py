@@ -1,0 +1,198 @@
+"""Nothing lost: checkpoints, resume bit for bit, results written as the run goes.
+
+A run is killed in-process by raising at a chosen chunk (the motion model's host-side step
+between chunks raises); its result folder then holds a readable partial time series, the
+summary marked incomplete and a checkpoint of the last completed chunk, from which
+``run(..., resume=True)`` continues to exactly the numbers of a run that was not interrupted.
+One real Ctrl-C (SIGINT) on the command line does the same.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import drumheat as dh
+from drumheat.motion import MOTIONS
+from drumheat.runner.checkpoint import CheckpointError
+from drumheat.scene import load_scene, scene_from_dict
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class Killed(RuntimeError):
+    pass
+
+
+def kill_at(monkeypatch, name: str, chunk: int):
+    """Make motion model ``name`` raise in its host-side step after chunk ``chunk``."""
+    cls = MOTIONS[name]
+    original = cls.between
+    count = {"n": 0}
+
+    def between(self, state, log, t):
+        count["n"] += 1
+        if count["n"] == chunk:
+            raise Killed(f"killed after chunk {chunk}")
+        return original(self, state, log, t)
+
+    monkeypatch.setattr(cls, "between", between)
+
+
+def assert_identical(a, b):
+    np.testing.assert_array_equal(a.T, b.T)
+    np.testing.assert_array_equal(a.trajectory.position, b.trajectory.position)
+    pd.testing.assert_frame_equal(a.timeseries, b.timeseries, check_exact=True)
+
+
+def dem_scene(**over):
+    """30 aluminium spheres in the 50 mm drum at 12 rpm (as tests/test_coupled.py)."""
+    raw = load_scene("weigler-static").to_dict()
+    raw["name"] = "resume-test"
+    raw["groups"][0]["count"] = raw["groups"][1]["count"] = 15
+    raw["run"].update(duration=0.2, output_interval=0.05, solver="explicit")
+    raw["drum"]["rpm"] = 12.0
+    raw["motion"] = {"model": "dem"}
+    raw["dem"] = {"stiffness": 2.0e4, "thermal_substeps": 1, "safety_factor": 0.2}
+    scene = scene_from_dict(raw)
+    return scene.replace(over) if over else scene
+
+
+def kill_and_resume(scene, name, chunk, tmp_path, monkeypatch):
+    ref = dh.run(scene, progress=False)
+    out = tmp_path / "run"
+    with monkeypatch.context() as m:
+        kill_at(m, name, chunk)
+        with pytest.raises(Killed):
+            dh.run(scene, out=out, progress=False)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["complete"] is False and "Killed" in summary["status"]
+    assert (out / "checkpoint.npz").is_file()
+    partial = pd.read_csv(out / "timeseries.csv")  # readable, one row per output so far
+    assert 1 <= len(partial) < len(ref.timeseries)
+    np.testing.assert_allclose(partial["T_mean"], ref.timeseries["T_mean"][:len(partial)],
+                               rtol=1e-9)  # the file holds 10 significant digits
+    res = dh.run(scene, out=out, progress=False, resume=True)
+    assert_identical(res, ref)
+    assert json.loads((out / "summary.json").read_text())["complete"] is True
+    assert not (out / "checkpoint.npz").exists()
+    return res
+
+
+def test_static_bed_resumes_bit_for_bit(tmp_path, monkeypatch):
+    scene = load_scene("weigler-static", {"run.duration": 300.0})
+    kill_and_resume(scene, "static", 4, tmp_path, monkeypatch)
+
+
+def test_coupled_dem_resumes_bit_for_bit(tmp_path, monkeypatch):
+    kill_and_resume(dem_scene(), "dem", 2, tmp_path, monkeypatch)
+
+
+@pytest.mark.parametrize("chunk", [3, 6])  # while coupled / during the replay
+def test_dem_with_replay_after_resumes_bit_for_bit(chunk, tmp_path, monkeypatch):
+    scene = dem_scene(**{"run.duration": 0.4, "run.output_interval": 0.1,
+                         "dem.record_interval": 0.05, "dem.replay_after": 0.2})
+    res = kill_and_resume(scene, "dem", chunk, tmp_path, monkeypatch)
+    assert (tmp_path / "run" / "contacts.npz").is_file()
+    assert res.summary["energy_balance_rel_error"] < 1e-12
+
+
+def test_replay_resumes_bit_for_bit(tmp_path, monkeypatch):
+    rec = dem_scene(**{"dem.record_interval": 0.01})
+    dh.run(rec, out=tmp_path / "rec", progress=False)
+    raw = rec.to_dict()
+    raw["motion"] = {"model": "replay"}
+    raw["replay"] = {"file": str(tmp_path / "rec" / "contacts.npz")}
+    raw["run"]["duration"] = 0.6
+    del raw["dem"]
+    kill_and_resume(scene_from_dict(raw), "replay", 5, tmp_path, monkeypatch)
+
+
+def test_checkpoint_of_another_scene_is_refused(tmp_path, monkeypatch):
+    scene = load_scene("weigler-static", {"run.duration": 300.0})
+    with monkeypatch.context() as m:
+        kill_at(m, "static", 3)
+        with pytest.raises(Killed):
+            dh.run(scene, out=tmp_path / "run", progress=False)
+    with pytest.raises(CheckpointError, match="another scene"):
+        dh.run(scene.replace({"heat.contact.alpha": 90.0}), out=tmp_path / "run",
+               progress=False, resume=True)
+
+
+def test_a_failing_run_keeps_the_earlier_result(tmp_path, monkeypatch):
+    scene = load_scene("weigler-static", {"run.duration": 300.0})
+    out = tmp_path / "run"
+    dh.run(scene, out=out, progress=False)
+    before = (out / "timeseries.csv").read_text()
+    with monkeypatch.context() as m:
+        kill_at(m, "static", 3)
+        with pytest.raises(Killed):
+            dh.run(scene.replace({"heat.contact.alpha": 90.0}), out=out, progress=False)
+    kept = tmp_path / "run.previous"
+    assert (kept / "timeseries.csv").read_text() == before  # the earlier result, intact
+    assert json.loads((kept / "summary.json").read_text())["complete"] is True
+    # a new run that completes replaces the partial one and removes the kept result
+    dh.run(scene, out=out, progress=False)
+    assert not kept.exists() and (out / "timeseries.csv").read_text() == before
+
+
+def test_two_runs_into_one_folder_are_refused(tmp_path):
+    from drumheat.results.files import RUN_LOCK, ResultFolderError, check_out_dir, register_outputs
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "summary.json").write_text('{"complete": false}')
+    (out / "scene.toml").write_text("")
+    register_outputs(out, ["summary.json", "scene.toml", RUN_LOCK])
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (out / RUN_LOCK).write_text(json.dumps({"pid": sleeper.pid,
+                                                "host": os.uname().nodename}))
+        with pytest.raises(ResultFolderError, match="still going"):
+            check_out_dir(out)
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    check_out_dir(out)  # the run ended: its lock no longer counts
+
+
+def test_ctrl_c_on_the_command_line_stops_cleanly_and_resumes(tmp_path):
+    """A real SIGINT: exit code 3, partial results and a checkpoint; --resume completes."""
+    out = tmp_path / "run"
+    sets = ["--set", "run.duration=1800", "--set", "run.output_interval=5",
+            "--set", "run.solver=explicit"]
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "drumheat.cli", "run", "weigler-static", "--out", str(out),
+           "--quiet"] + sets
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    csv = out / "timeseries.csv"
+    deadline = time.time() + 300
+    while time.time() < deadline and proc.poll() is None:
+        if csv.is_file() and len(csv.read_text().splitlines()) >= 3:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run ended before it could be interrupted"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 3, err
+    assert "--resume" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["complete"] is False and (out / "checkpoint.npz").is_file()
+    assert len(pd.read_csv(csv)) >= 2
+    done = subprocess.run(cmd + ["--resume"], env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr
+    ref = subprocess.run([sys.executable, "-m", "drumheat.cli", "run", "weigler-static",
+                          "--out", str(tmp_path / "ref"), "--quiet"] + sets, env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert ref.returncode == 0, ref.stderr
+    pd.testing.assert_frame_equal(pd.read_csv(csv), pd.read_csv(tmp_path / "ref" /
+                                                                "timeseries.csv"))
