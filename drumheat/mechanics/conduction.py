@@ -21,6 +21,14 @@ with one of two conductance laws:
   h = 4 k_i k_j / (k_i + k_j) in W/(m K) (LIGGGHTS ``heat/gran/conduction`` without area
   correction, shared/peers/liggghts).
 
+A pair conducts while it overlaps (Weigler digest eq. [2.4]: the thermal pipe exists while the
+particles touch, sec. 4) or, with ``gap_tolerance`` > 0, while the gap between the surfaces is at
+most ``gap_tolerance`` times the smaller diameter, ``L - r_i - r_j <= tol min(d_i, d_j)`` (the
+contact tolerance of :func:`drumheat.thermal.network.find_contacts_2d_drum`, for beds whose
+soft contacts leave hairline gaps between particles that rest on each other). Such a pair
+conducts with ``g`` of the ``"projected"`` law; the ``"overlap"`` law has no overlap circle
+there and gives ``g = 0``. 0 (default) is overlap only.
+
 The heat flows sum to zero over the bed (each pair moves q from one particle to the other), so
 the bed's heat content is conserved to round-off. The explicit update is stable for
 ``dt <= C_i / sum_j g_ij`` (weigler-thermal-dem.md [2.2]); for millimetre particles at DEM time
@@ -52,11 +60,14 @@ class PairConduction(NamedTuple):
       law: ``"projected"`` (h = alpha_pp, W/(m^2 K)) or ``"overlap"`` (h in W/(m K)).
       coefficient: h of the law.
       heat_capacity: m c of every particle, J/K, shape (N,).
+      gap_tolerance: a pair conducts while its surface gap is at most this fraction of the
+        smaller diameter (module docstring); 0 = while it overlaps.
     """
 
     law: str
     coefficient: float
     heat_capacity: object
+    gap_tolerance: float = 0.0
 
     def checked(self, n: int) -> "PairConduction":
         """Validated copy with a float64 heat-capacity array of length n."""
@@ -68,7 +79,10 @@ class PairConduction(NamedTuple):
         cap = np.broadcast_to(np.asarray(self.heat_capacity, dtype=float), (n,))
         if not np.all(cap > 0):
             raise ValueError("heat capacities m c must be positive")
-        return PairConduction(self.law, h, jnp.asarray(cap, jnp.float64))
+        tol = float(self.gap_tolerance)
+        if not (np.isfinite(tol) and tol >= 0):
+            raise ValueError(f"conduction gap tolerance must be finite and >= 0, got {tol}")
+        return PairConduction(self.law, h, jnp.asarray(cap, jnp.float64), tol)
 
 
 def pair_conductance(law: str, h, ri, rj, distance):
@@ -81,17 +95,34 @@ def pair_conductance(law: str, h, ri, rj, distance):
     return h * jnp.sqrt(jnp.maximum(area, 0.0))
 
 
-def heat_flow(T, contacts, radius, law: str, h):
-    """Heat flow into each particle (W, float64, shape (N,)) through the touching pairs.
+def heat_flow(T, contacts, radius, law: str, h, gap_tolerance: float = 0.0, distance=None):
+    """Heat flow into each particle (W, float64, shape (N,)) through the conducting pairs.
 
     ``contacts`` is the step's :class:`~drumheat.mechanics.Contacts` (pair_i, pair_j,
-    pair_mask, pair_distance), radius the particle radii (N,).
+    pair_mask, pair_distance), radius the particle radii (N,). With ``gap_tolerance`` > 0 the
+    pairs whose surface gap is at most ``gap_tolerance min(d_i, d_j)`` conduct too (module
+    docstring); ``distance`` must then be the centre distance of every neighbour pair (M,),
+    also where nothing touches (``Contacts.pair_distance`` is zero there), in the dtype of the
+    mechanics: the gap test is made in that dtype, as the mechanics test the overlap.
     """
+    if gap_tolerance > 0 and distance is None:
+        raise ValueError("heat_flow with a gap tolerance needs the pair distances")
     n = T.shape[0]
     mask = contacts.pair_mask
+    if gap_tolerance > 0:
+        valid = contacts.pair_i < n
+        i0 = jnp.where(valid, contacts.pair_i, 0)
+        j0 = jnp.where(valid, contacts.pair_j, 0)
+        r = jnp.asarray(radius).astype(distance.dtype)
+        ri, rj = r[i0], r[j0]
+        overlap = ri + rj - distance  # as the mechanics compute it
+        mask = mask | (valid & (overlap >= -(gap_tolerance * (2 * jnp.minimum(ri, rj)))))
+        dist_all = distance
+    else:
+        dist_all = contacts.pair_distance
     i = jnp.where(mask, contacts.pair_i, 0)
     j = jnp.where(mask, contacts.pair_j, 0)
-    dist = jnp.where(mask, contacts.pair_distance, 1.0)
+    dist = jnp.where(mask, dist_all, 1.0)
     g = pair_conductance(law, h, radius[i], radius[j], dist)
     q = jnp.where(mask, g * (T[j] - T[i]), 0.0)
     # one scatter for both ends of every pair (padding index n is dropped)

@@ -1,30 +1,52 @@
 // DEM contact kernel for CPU as one loop: an XLA FFI custom call (mechanics/cpu_kernel.py).
 //
-// The same contact law as drumheat.mechanics.contact_forces.contact_law (linear spring-dashpot
-// normal force clipped at zero, Cundall-Strack tangential spring rotated onto the tangent plane,
-// Coulomb cap, tangential dashpot only while sticking; Weigler digest [2.1]-[2.4],
-// peers/liggghts/README.md "hooke" with tangential history) for 3D spheres of one material in
-// float32, with an optional periodic z axis, for the particle-particle pairs and the
-// particle-wall contacts (the wall geometry is evaluated in JAX and comes in as distance, unit
-// normal and wall velocity per particle and wall).
+// The contact law is the one of drumheat.mechanics.contact_forces, read in `contact` and
+// `rolling` below (one place each):
+//  * contact_law: linear spring-dashpot normal force clipped at zero, Cundall-Strack tangential
+//    spring rotated onto the tangent plane, Coulomb cap, tangential dashpot only while sticking
+//    (Weigler digest, shared/reference/weigler-thermal-dem.md sec. 4 [2.1]-[2.4] and sec. 5;
+//    shared/peers/liggghts/README.md "hooke" with tangential history);
+//  * rolling_torque: constant directional torque M = -min(mu_r R* F_n, I* |w_rel| / dt)
+//    w_rel / |w_rel| (Ai et al. 2011 "model A", capped so that it cannot reverse w_rel).
+// for the particle-particle pairs and the particle-wall contacts (the wall geometry is evaluated
+// in JAX and comes in as distance, unit normal and wall velocity per particle and wall; a wall
+// is partner A with infinite mass, no radius, spin omega_wall about z).
+//
+// Scope: 3D (positions, velocities, spins (N, 3)) and 2D (a monolayer of spheres: positions and
+// velocities (N, 2) in x-y, spin (N) about z, torque a_x f_y - a_y f_x, as cross_w_a / cross_a_f
+// of contact_forces.py); float32 or float64 mechanics (one template instance per dtype and
+// dimension, chosen at run time from the buffers); several materials: per-pair parameters from
+// the particle-particle tables (T, T) and per particle-wall slot from the tables (T, W), indexed
+// by the particle types; an optional periodic last axis (3D).
 //
 // The new pair and wall springs may share their buffers with the old ones (cpu_kernel.py aliases
 // them): each slot reads its old spring before it writes the new one, and nothing else.
 //
-// Inputs: positions, velocities, spins (N, 3); radii, masses (N); pairs (2, M) with padding N;
-// pair springs (M, 3); per particle and wall: distance (N, W), normal from the wall to the
-// particle (N, W, 3), wall velocity at the particle (N, W, 3), wall springs (N, W, 3); wall
-// contact parameters (5, W): kn, kt, zeta_n, zeta_t, mu. Outputs: contact forces and torques
-// per particle (N, 3); new pair springs (M, 3); overlap, centre distance and normal force per
-// pair (M); new wall springs (N, W, 3); overlap and normal force per wall slot (N, W) (all zero
-// where nothing touches); the largest overlap / radius (smaller radius of a pair) (1).
+// Inputs (S = float or double):
+//   0 positions (N, D) S      1 velocities (N, D) S    2 spins (N, 3) or (N) S
+//   3 radii (N) S             4 masses (N) S           5 moments of inertia (N) S
+//   6 particle types (N) s32  7 pairs (2, M) s32, padding N
+//   8 pair springs (M, D) S
+//   9 wall distance (N, W) S  10 wall normal, from the wall to the particle (N, W, D) S
+//  11 wall velocity at the particle (N, W, D) S       12 wall springs (N, W, D) S
+//  13 particle-particle tables (6, T, T) S: kn, kt, zeta_n, zeta_t, mu, mu_roll
+//  14 particle-wall tables (6, T, W) S: the same per particle type and wall
+//  15 wall angular velocities about z (W) S          16 temperatures (N or 0) f64
+// Attributes: dt, L (period of the last axis, 0 = none), law (conduction, < 0 = none), h
+// (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling).
+// Outputs: 0 forces (N, D), 1 torques (N, 3) or (N); 2 new pair springs (M, D); 3 overlap,
+// 4 centre distance, 5 normal force per pair (M); 6 new wall springs (N, W, D); 7 overlap and
+// 8 normal force per wall slot (N, W) (all zero where nothing touches); 9 the largest
+// overlap / radius (smaller radius of a pair) (1); 10 heat flow into each particle (N or 0) f64.
 //
-// Contact conduction (optional, attribute law >= 0; drumheat/mechanics/conduction.py): with
-// temperatures T (N, float64) in, the heat flow into each particle Q (N, float64) out,
-// q = g (T_j - T_i) through every touching pair, g = h pi min(r_i, r_j)^2 (law 0, "projected":
-// Weigler digest eq. [2.7] with A_p = pi d^2 / 4 of the smaller sphere) or g = h sqrt(A_c) with
-// A_c the area of the overlap circle (law 1, "overlap": LIGGGHTS heat/gran/conduction). With
-// law < 0, T and Q have length 0.
+// Contact conduction (optional, law >= 0; drumheat/mechanics/conduction.py): the heat flow into
+// each particle Q_i = sum_j g_ij (T_j - T_i) over the conducting pairs, g = h pi min(r_i, r_j)^2
+// (law 0, "projected": Weigler digest eq. [2.7] with A_p = pi d^2 / 4 of the smaller sphere) or
+// g = h sqrt(A_c) with A_c the area of the overlap circle (law 1, "overlap": LIGGGHTS
+// heat/gran/conduction; zero for a pair that does not overlap). A pair conducts when it
+// overlaps, or with tol > 0 when its surface gap L - r_i - r_j is at most tol min(d_i, d_j)
+// (the gap tolerance of drumheat.thermal.network.find_contacts_2d_drum). With law < 0, the
+// temperatures and Q have length 0.
 //
 // Threads: the pair slots and wall slots are cut into C equal chunks, C = the threads of XLA's
 // intra-op pool, at most one chunk per MIN_CHUNK pair slots (DRUMHEAT_KERNEL_THREADS sets C).
@@ -39,6 +61,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <thread>
 #include <vector>
 #include "xla/ffi/api/ffi.h"
@@ -48,54 +71,123 @@ namespace {
 
 constexpr int64_t MIN_CHUNK = 8000;  // pair slots per chunk at least (below: one thread)
 constexpr double kPi = 3.14159265358979323846;
+constexpr int kTables = 6;  // kn, kt, zeta_n, zeta_t, mu, mu_roll
 
+// the parameters of one material pair (one entry of the contact tables)
+template <typename S>
 struct Law {
-  float kn, kt, zn, zt, mu, sqkn, sqkt;
+  S kn, kt, zn, zt, mu, mur, sqkn, sqkt;
 };
 
-// One contact between partner A and partner B: unit normal n from A to B, overlap ov, relative
-// velocity vr of B's contact point against A's, effective mass me, old spring so. Writes the
-// new spring to s (which may be so: the springs are updated in place) and returns the normal
-// force; f receives the force on B.
-inline float contact(const Law& c, float dt, const float n[3], float ov, const float vr[3],
-                     float me, const float* so, float* s, float f[3]) {
-  const float sqm = std::sqrt(me);
-  const float vn = vr[0]*n[0] + vr[1]*n[1] + vr[2]*n[2];
-  float fn = c.kn*ov - 2.f*c.zn*c.sqkn*sqm*vn;
-  if (fn < 0.f) fn = 0.f;
-  const float vt0 = vr[0] - vn*n[0], vt1 = vr[1] - vn*n[1], vt2 = vr[2] - vn*n[2];
-  const float xin = so[0]*n[0] + so[1]*n[1] + so[2]*n[2];
-  const float xp0 = so[0] - xin*n[0], xp1 = so[1] - xin*n[1], xp2 = so[2] - xin*n[2];
-  const float lo = std::sqrt(so[0]*so[0] + so[1]*so[1] + so[2]*so[2]);
-  const float lp = std::sqrt(xp0*xp0 + xp1*xp1 + xp2*xp2);
-  const float sc = lp > 0 ? lo / lp : 1.f;
-  float x0 = xp0*sc + vt0*dt, x1 = xp1*sc + vt1*dt, x2 = xp2*sc + vt2*dt;
-  const float fs0 = -c.kt*x0, fs1 = -c.kt*x1, fs2 = -c.kt*x2;
-  const float fl = std::sqrt(fs0*fs0 + fs1*fs1 + fs2*fs2);
-  const float fc = c.mu*fn;
-  float ft0, ft1, ft2;
-  if (fl > fc) {
-    const float ratio = fc / fl;
-    ft0 = fs0*ratio; ft1 = fs1*ratio; ft2 = fs2*ratio;
-    x0 = -ft0/c.kt; x1 = -ft1/c.kt; x2 = -ft2/c.kt;
-  } else {
-    const float gt = 2.f*c.zt*c.sqkt*sqm;
-    ft0 = fs0 - gt*vt0; ft1 = fs1 - gt*vt1; ft2 = fs2 - gt*vt2;
+// tables (6, A, B) -> A * B laws
+template <typename S>
+std::vector<Law<S>> laws(const S* tab, int64_t a, int64_t b) {
+  const int64_t ab = a * b;
+  std::vector<Law<S>> out(ab);
+  for (int64_t q = 0; q < ab; ++q) {
+    const S kn = tab[q], kt = tab[ab + q];
+    out[q] = Law<S>{kn, kt, tab[2*ab + q], tab[3*ab + q], tab[4*ab + q], tab[5*ab + q],
+                    std::sqrt(kn), std::sqrt(kt)};
   }
-  s[0] = x0; s[1] = x1; s[2] = x2;  // so is not read after this
-  f[0] = fn*n[0] + ft0; f[1] = fn*n[1] + ft1; f[2] = fn*n[2] + ft2;
+  return out;
+}
+
+template <typename S, int D>
+inline S dot(const S* a, const S* b) {
+  S s = a[0]*b[0] + a[1]*b[1];
+  if constexpr (D == 3) s += a[2]*b[2];
+  return s;
+}
+
+// contact_forces.contact_law for one contact between partner A and partner B: unit normal n
+// from A to B, overlap ov > 0, relative velocity vr of B's contact point against A's, effective
+// mass me, old spring so. Writes the new spring to s (which may be so: the springs are updated
+// in place) and returns the normal force F_n; f receives the force on B.
+template <typename S, int D>
+inline S contact(const Law<S>& c, S dt, const S* n, S ov, const S* vr, S me, const S* so, S* s,
+                 S* f) {
+  const S sqm = std::sqrt(me);
+  const S vn = dot<S, D>(vr, n);  // > 0: separating
+  S fn = c.kn*ov - S(2)*c.zn*c.sqkn*sqm*vn;  // k_n delta + gamma_n d(delta)/dt
+  if (fn < S(0)) fn = S(0);  // never attractive
+  S vt[D], xp[D], x[D], fs[D], ft[D];
+  for (int a = 0; a < D; ++a) vt[a] = vr[a] - vn*n[a];
+  // rotate the old spring onto the current tangent plane, keeping its length
+  const S xin = dot<S, D>(so, n);
+  for (int a = 0; a < D; ++a) xp[a] = so[a] - xin*n[a];
+  const S lo = std::sqrt(dot<S, D>(so, so));
+  const S lp = std::sqrt(dot<S, D>(xp, xp));
+  const S sc = lp > S(0) ? lo / lp : S(1);
+  for (int a = 0; a < D; ++a) { x[a] = xp[a]*sc + vt[a]*dt; fs[a] = -c.kt*x[a]; }
+  const S fl = std::sqrt(dot<S, D>(fs, fs));
+  const S fc = c.mu*fn;
+  if (fl > fc) {  // sliding: the spring is kept at the Coulomb limit, no tangential dashpot
+    const S ratio = fc / fl;
+    for (int a = 0; a < D; ++a) { ft[a] = fs[a]*ratio; x[a] = -ft[a]/c.kt; }
+  } else {
+    const S gt = S(2)*c.zt*c.sqkt*sqm;
+    for (int a = 0; a < D; ++a) ft[a] = fs[a] - gt*vt[a];
+  }
+  for (int a = 0; a < D; ++a) { s[a] = x[a]; f[a] = fn*n[a] + ft[a]; }  // so not read after
   return fn;
 }
 
-// w x a
-inline void cross(const float* w, const float* a, float* out) {
-  out[0] = w[1]*a[2] - w[2]*a[1];
-  out[1] = w[2]*a[0] - w[0]*a[2];
-  out[2] = w[0]*a[1] - w[1]*a[0];
+// contact_forces.rolling_torque: the rolling-resistance torque M on partner B for the relative
+// spin w = w_B - w_A (a 3-vector in 3D, the z component in 2D)
+template <typename S, int DW>
+inline void rolling(const S* w, S fn, S reff, S mur, S ieff, S dt, S* M) {
+  if constexpr (DW == 1) {
+    const S mag = std::abs(w[0]);
+    const S a = mur*reff*fn, b = ieff*mag/dt;
+    const S cap = a < b ? a : b;
+    M[0] = -cap * (w[0] > S(0) ? S(1) : (w[0] < S(0) ? S(-1) : S(0)));
+  } else {
+    const S mag = std::sqrt(w[0]*w[0] + w[1]*w[1] + w[2]*w[2]);
+    const S a = mur*reff*fn, b = ieff*mag/dt;
+    const S cap = a < b ? a : b;
+    const S k = cap / (mag > S(0) ? mag : S(1));
+    M[0] = -(k*w[0]); M[1] = -(k*w[1]); M[2] = -(k*w[2]);
+  }
 }
 
-// Per-chunk accumulators (6 N floats of force and torque, then N doubles of heat) that live
-// across calls (no allocation and page faults every step).
+// w x a: a 3-vector in 3D; in 2D w is the z component: w e_z x a = w (-a_y, a_x)
+template <typename S, int D>
+inline void spin_cross(const S* w, const S* a, S* out) {
+  if constexpr (D == 3) {
+    out[0] = w[1]*a[2] - w[2]*a[1];
+    out[1] = w[2]*a[0] - w[0]*a[2];
+    out[2] = w[0]*a[1] - w[1]*a[0];
+  } else {
+    out[0] = -w[0]*a[1];
+    out[1] = w[0]*a[0];
+  }
+}
+
+// T += sign (a x f): a 3-vector in 3D, the z component in 2D
+template <typename S, int D>
+inline void add_torque(S* T, const S* a, const S* f, S sign) {
+  if constexpr (D == 3) {
+    T[0] += sign*(a[1]*f[2] - a[2]*f[1]);
+    T[1] += sign*(a[2]*f[0] - a[0]*f[2]);
+    T[2] += sign*(a[0]*f[1] - a[1]*f[0]);
+  } else {
+    T[0] += sign*(a[0]*f[1] - a[1]*f[0]);
+  }
+}
+
+// conductance of a conducting pair at centre distance L (see the header), W/K
+inline double conductance(int law, double h, double ri, double rj, double L) {
+  if (law == 0) {
+    const double rm = ri < rj ? ri : rj;
+    return h * kPi * rm * rm;
+  }
+  const double area = -0.25 * kPi * (L - ri - rj) * (L + ri - rj) * (L - ri + rj) *
+                      (L + ri + rj) / (L * L);
+  return area > 0 ? h * std::sqrt(area) : 0.0;
+}
+
+// Per-chunk accumulators (forces and torques in S, then N doubles of heat) that live across
+// calls (no allocation and page faults every step).
 using Buffer = std::vector<double>;
 std::mutex g_buf_mu;
 std::vector<std::unique_ptr<Buffer>> g_bufs;
@@ -114,17 +206,6 @@ std::unique_ptr<Buffer> take_buffer(size_t size) {
 void give_buffer(std::unique_ptr<Buffer> b) {
   std::lock_guard<std::mutex> lock(g_buf_mu);
   g_bufs.push_back(std::move(b));
-}
-
-// conductance of a touching pair (see the header), W/K
-inline double conductance(int law, double h, double ri, double rj, double L) {
-  if (law == 0) {
-    const double rm = ri < rj ? ri : rj;
-    return h * kPi * rm * rm;
-  }
-  const double area = -0.25 * kPi * (L - ri - rj) * (L + ri - rj) * (L - ri + rj) *
-                      (L + ri + rj) / (L * L);
-  return area > 0 ? h * std::sqrt(area) : 0.0;
 }
 
 // Chunks 1..C-1 offered to the pool; see the header for the protocol's purpose. A pool task
@@ -147,117 +228,151 @@ void help(const std::shared_ptr<Job>& job) {
   job->active.fetch_sub(1);
 }
 
-}  // namespace
+// the buffers of one call, untyped (their dtype is checked in ContactsImpl)
+struct Call {
+  const void *x, *v, *w, *r, *ms, *in, *sp, *wd, *wn, *wv, *ws, *tpp, *tpw, *wom;
+  const int32_t *pt, *P;
+  const double* temp;
+  void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX;
+  double* Q;
+  int64_t n, m, nw, nt;
+  double dt, L, h, tol;
+  int law;
+  bool rot;
+};
 
-static ffi::Error ContactsImpl(
-    ffi::ThreadPool pool, ffi::Buffer<ffi::F32> pos, ffi::Buffer<ffi::F32> vel,
-    ffi::Buffer<ffi::F32> omg, ffi::Buffer<ffi::F32> rad, ffi::Buffer<ffi::F32> mass,
-    ffi::Buffer<ffi::S32> pairs, ffi::Buffer<ffi::F32> spring, ffi::Buffer<ffi::F32> wdist,
-    ffi::Buffer<ffi::F32> wnrm, ffi::Buffer<ffi::F32> wvel, ffi::Buffer<ffi::F32> wspring,
-    ffi::Buffer<ffi::F32> wparams, ffi::Buffer<ffi::F64> temp, float kn, float kt, float zn,
-    float zt, float mu, float dt, float L, int32_t law, double h,
-    ffi::ResultBuffer<ffi::F32> force, ffi::ResultBuffer<ffi::F32> torque,
-    ffi::ResultBuffer<ffi::F32> nspring, ffi::ResultBuffer<ffi::F32> ovl_out,
-    ffi::ResultBuffer<ffi::F32> dist_out, ffi::ResultBuffer<ffi::F32> fn_out,
-    ffi::ResultBuffer<ffi::F32> nwspring, ffi::ResultBuffer<ffi::F32> wovl_out,
-    ffi::ResultBuffer<ffi::F32> wfn_out, ffi::ResultBuffer<ffi::F32> max_ratio,
-    ffi::ResultBuffer<ffi::F64> heat) {
-  const int64_t n = rad.dimensions()[0];
-  const int64_t m = spring.dimensions()[0];
-  const int64_t nw = wdist.dimensions().size() > 1 ? wdist.dimensions()[1] : 0;
-  const float *x = pos.typed_data(), *v = vel.typed_data(), *w = omg.typed_data();
-  const float *r = rad.typed_data(), *ms = mass.typed_data(), *sp = spring.typed_data();
-  const int32_t* P = pairs.typed_data();
-  const float *WD = wdist.typed_data(), *WN = wnrm.typed_data(), *WV = wvel.typed_data();
-  const float *WS = wspring.typed_data(), *WP = wparams.typed_data();
-  float *S = nspring->typed_data(), *WSo = nwspring->typed_data();
-  float *OV = ovl_out->typed_data(), *DI = dist_out->typed_data(), *FN = fn_out->typed_data();
-  float *WO = wovl_out->typed_data(), *WF = wfn_out->typed_data();
-  const double* TK = temp.typed_data();
-  const bool heat_on = law >= 0;
-  const Law pp{kn, kt, zn, zt, mu, std::sqrt(kn), std::sqrt(kt)};
-  std::vector<Law> pw(nw);
-  for (int64_t q = 0; q < nw; ++q) {
-    const float k = WP[q], t = WP[nw + q];
-    pw[q] = Law{k, t, WP[2*nw + q], WP[3*nw + q], WP[4*nw + q], std::sqrt(k), std::sqrt(t)};
-  }
+template <typename S, int D>
+void run(ffi::ThreadPool& pool, const Call& a) {
+  constexpr int DW = D == 3 ? 3 : 1;  // spin and torque components
+  const int64_t n = a.n, m = a.m, nw = a.nw, nt = a.nt;
+  const S *x = static_cast<const S*>(a.x), *v = static_cast<const S*>(a.v);
+  const S *w = static_cast<const S*>(a.w), *r = static_cast<const S*>(a.r);
+  const S *ms = static_cast<const S*>(a.ms), *in = static_cast<const S*>(a.in);
+  const S *sp = static_cast<const S*>(a.sp), *WD = static_cast<const S*>(a.wd);
+  const S *WN = static_cast<const S*>(a.wn), *WV = static_cast<const S*>(a.wv);
+  const S *WS = static_cast<const S*>(a.ws), *WOM = static_cast<const S*>(a.wom);
+  const int32_t *pt = a.pt, *P = a.P;
+  S *Sn = static_cast<S*>(a.S), *WSo = static_cast<S*>(a.WS);
+  S *OV = static_cast<S*>(a.OV), *DI = static_cast<S*>(a.DI), *FN = static_cast<S*>(a.FN);
+  S *WO = static_cast<S*>(a.WO), *WF = static_cast<S*>(a.WF);
+  const double* TK = a.temp;
+  const bool heat_on = a.law >= 0, gap_on = heat_on && a.tol > 0, rot = a.rot;
+  const S dt = S(a.dt), L = S(a.L), tol = S(a.tol);
+  const std::vector<Law<S>> pp = laws<S>(static_cast<const S*>(a.tpp), nt, nt);
+  const std::vector<Law<S>> pw = laws<S>(static_cast<const S*>(a.tpw), nt, nw);
+  const bool one_type = nt == 1;
+  bool roll_pp = false, roll_pw = false;
+  for (const auto& c : pp) roll_pp = roll_pp || c.mur > S(0);
+  for (const auto& c : pw) roll_pw = roll_pw || c.mur > S(0);
+  roll_pp = roll_pp && rot;
+  roll_pw = roll_pw && rot;
 
-  // pair slots [k0, k1) and wall slots [s0, s1) into the accumulators F, T (N, 3); returns
-  // the largest overlap ratio seen. Per-slot outputs are disjoint between chunks.
-  auto work = [&](int64_t k0, int64_t k1, int64_t s0, int64_t s1, float* F, float* T,
-                  double* Q) -> float {
-    float max_ov = 0.f;
+  // pair slots [k0, k1) and wall slots [s0, s1) into the accumulators F (N, D), T (N, DW) and
+  // Q (N); returns the largest overlap ratio seen. Per-slot outputs are disjoint between chunks.
+  auto work = [&](int64_t k0, int64_t k1, int64_t s0, int64_t s1, S* F, S* T,
+                  double* Q) -> S {
+    S max_ov = S(0);
     for (int64_t k = k0; k < k1; ++k) {
       const int32_t i = P[k], j = P[m + k];
-      float* s = S + 3*k;
-      OV[k] = 0.f; DI[k] = 0.f; FN[k] = 0.f;
-      if (i >= n) { s[0] = s[1] = s[2] = 0.f; continue; }
-      float d0 = x[3*j] - x[3*i], d1 = x[3*j+1] - x[3*i+1], d2 = x[3*j+2] - x[3*i+2];
-      // nearest periodic image (positions are kept in [0, L), so |d2| < L); same as
-      // d2 - L rint(d2 / L), without a libm call per slot
-      if (L > 0) d2 = d2 > 0.5f*L ? d2 - L : (d2 < -0.5f*L ? d2 + L : d2);
-      const float dist2 = d0*d0 + d1*d1 + d2*d2;
-      const float rs = r[i] + r[j];
-      if (dist2 >= rs * rs) { s[0] = s[1] = s[2] = 0.f; continue; }
-      const float dist = std::sqrt(dist2);
-      const float ov = rs - dist;
-      const float inv = dist > 0 ? 1.f / dist : 0.f;
-      const float nr[3] = {d0*inv, d1*inv, d2*inv};
-      const float li = r[i] - 0.5f*ov, lj = -(r[j] - 0.5f*ov);
-      const float ai[3] = {li*nr[0], li*nr[1], li*nr[2]};
-      const float aj[3] = {lj*nr[0], lj*nr[1], lj*nr[2]};
-      float ci[3], cj[3];
-      cross(w + 3*i, ai, ci);
-      cross(w + 3*j, aj, cj);
-      const float vr[3] = {v[3*j] + cj[0] - v[3*i] - ci[0], v[3*j+1] + cj[1] - v[3*i+1] - ci[1],
-                           v[3*j+2] + cj[2] - v[3*i+2] - ci[2]};
-      float f[3];
-      FN[k] = contact(pp, dt, nr, ov, vr, ms[i]*ms[j]/(ms[i]+ms[j]), sp + 3*k, s, f);
-      F[3*j] += f[0]; F[3*j+1] += f[1]; F[3*j+2] += f[2];
-      F[3*i] -= f[0]; F[3*i+1] -= f[1]; F[3*i+2] -= f[2];
-      // torque_i = a_i x (-f), torque_j = a_j x f
-      T[3*i]   -= ai[1]*f[2] - ai[2]*f[1]; T[3*i+1] -= ai[2]*f[0] - ai[0]*f[2];
-      T[3*i+2] -= ai[0]*f[1] - ai[1]*f[0];
-      T[3*j]   += aj[1]*f[2] - aj[2]*f[1]; T[3*j+1] += aj[2]*f[0] - aj[0]*f[2];
-      T[3*j+2] += aj[0]*f[1] - aj[1]*f[0];
+      S* s = Sn + D*k;
+      OV[k] = S(0); DI[k] = S(0); FN[k] = S(0);
+      if (i >= n) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
+      S d[D];  // from i to j
+      for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
+      // nearest periodic image of the last axis (positions are kept in [0, L), so |d| < L);
+      // the same as d - L rint(d / L), without a libm call per slot
+      if constexpr (D == 3)
+        if (L > S(0)) d[2] = d[2] > S(0.5)*L ? d[2] - L : (d[2] < S(-0.5)*L ? d[2] + L : d[2]);
+      const S dist2 = dot<S, D>(d, d);
+      const S ri = r[i], rj = r[j];
+      const S rs = ri + rj;
+      const S rmin = ri < rj ? ri : rj;
+      // conduction across a gap of at most tol min(d_i, d_j)
+      const S gap = gap_on ? tol*(S(2)*rmin) : S(0);
+      // a cheap test first: the exact one below (on the overlap, as the JAX kernel decides)
+      // cannot pass beyond this bound
+      const S reach = rs + gap;
+      if (dist2 > reach*reach*S(1.0001)) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
+      const S dist = std::sqrt(dist2);
+      const S ov = rs - dist;
+      if (!(ov > S(0))) {
+        for (int c = 0; c < D; ++c) s[c] = S(0);
+        if (gap_on && ov >= -gap) {
+          const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
+          Q[i] += q; Q[j] -= q;
+        }
+        continue;
+      }
+      const S inv = dist > S(0) ? S(1) / dist : S(0);
+      S nr[D], ai[D], aj[D], ci[D], cj[D], vr[D], f[D];
+      const S li = ri - S(0.5)*ov, lj = -(rj - S(0.5)*ov);
+      for (int c = 0; c < D; ++c) { nr[c] = d[c]*inv; ai[c] = li*nr[c]; aj[c] = lj*nr[c]; }
+      spin_cross<S, D>(w + DW*i, ai, ci);
+      spin_cross<S, D>(w + DW*j, aj, cj);
+      for (int c = 0; c < D; ++c) vr[c] = (v[D*j + c] + cj[c]) - (v[D*i + c] + ci[c]);
+      const Law<S>& law = one_type ? pp[0] : pp[pt[i]*nt + pt[j]];
+      const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[i]*ms[j]/(ms[i] + ms[j]), sp + D*k, s,
+                                 f);
+      FN[k] = fn;
+      for (int c = 0; c < D; ++c) { F[D*j + c] += f[c]; F[D*i + c] -= f[c]; }
+      if (rot) {
+        add_torque<S, D>(T + DW*i, ai, f, S(-1));  // a_i x (-f)
+        add_torque<S, D>(T + DW*j, aj, f, S(1));   // a_j x f
+        if (roll_pp) {
+          S wr[DW], M[DW];
+          for (int c = 0; c < DW; ++c) wr[c] = w[DW*j + c] - w[DW*i + c];
+          const S ii = in[i], ij = in[j];
+          rolling<S, DW>(wr, fn, ri*rj/(ri + rj), law.mur, ii*ij/(ii + ij), dt, M);
+          for (int c = 0; c < DW; ++c) { T[DW*j + c] += M[c]; T[DW*i + c] -= M[c]; }
+        }
+      }
       OV[k] = ov; DI[k] = dist;
       if (heat_on) {
-        const double q = conductance(law, h, r[i], r[j], dist) * (TK[j] - TK[i]);
+        const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
         Q[i] += q; Q[j] -= q;
       }
-      const float ratio_ov = ov / (r[i] < r[j] ? r[i] : r[j]);
+      const S ratio_ov = ov / rmin;
       if (ratio_ov > max_ov) max_ov = ratio_ov;
     }
-    // walls: partner A is the wall (no spin, infinite mass), B the particle
+    // walls: partner A is the wall (spin omega_wall about z, infinite mass), B the particle
     for (int64_t q = s0; q < s1; ++q) {
       const int64_t p = q / nw, wl = q % nw;
-      float* s = WSo + 3*q;
-      const float ov = r[p] - WD[q];
-      WO[q] = 0.f; WF[q] = 0.f;
-      if (!(ov > 0.f)) { s[0] = s[1] = s[2] = 0.f; continue; }
-      const float* nr = WN + 3*q;
-      const float l = -(r[p] - 0.5f*ov);
-      const float a[3] = {l*nr[0], l*nr[1], l*nr[2]};
-      float c[3];
-      cross(w + 3*p, a, c);
-      const float vr[3] = {v[3*p] + c[0] - WV[3*q], v[3*p+1] + c[1] - WV[3*q+1],
-                           v[3*p+2] + c[2] - WV[3*q+2]};
-      float f[3];
-      WF[q] = contact(pw[wl], dt, nr, ov, vr, ms[p], WS + 3*q, s, f);
-      F[3*p] += f[0]; F[3*p+1] += f[1]; F[3*p+2] += f[2];
-      T[3*p]   += a[1]*f[2] - a[2]*f[1]; T[3*p+1] += a[2]*f[0] - a[0]*f[2];
-      T[3*p+2] += a[0]*f[1] - a[1]*f[0];
+      S* s = WSo + D*q;
+      const S rp = r[p];
+      const S ov = rp - WD[q];
+      WO[q] = S(0); WF[q] = S(0);
+      if (!(ov > S(0))) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
+      const S* nr = WN + D*q;
+      const S l = -(rp - S(0.5)*ov);
+      S al[D], cw[D], vr[D], f[D];
+      for (int c = 0; c < D; ++c) al[c] = l*nr[c];
+      spin_cross<S, D>(w + DW*p, al, cw);
+      for (int c = 0; c < D; ++c) vr[c] = v[D*p + c] + cw[c] - WV[D*q + c];
+      const Law<S>& law = pw[(one_type ? 0 : pt[p])*nw + wl];
+      const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[p], WS + D*q, s, f);
+      WF[q] = fn;
+      for (int c = 0; c < D; ++c) F[D*p + c] += f[c];
+      if (rot) {
+        add_torque<S, D>(T + DW*p, al, f, S(1));
+        if (roll_pw) {
+          S wr[DW], M[DW];
+          for (int c = 0; c < DW; ++c) wr[c] = w[DW*p + c];
+          wr[DW - 1] -= WOM[wl];  // the wall spins about z
+          rolling<S, DW>(wr, fn, rp, law.mur, in[p], dt, M);
+          for (int c = 0; c < DW; ++c) T[DW*p + c] += M[c];
+        }
+      }
       WO[q] = ov;
-      if (ov / r[p] > max_ov) max_ov = ov / r[p];
+      if (ov / rp > max_ov) max_ov = ov / rp;
     }
     return max_ov;
   };
 
-  float* F0 = force->typed_data();
-  float* T0 = torque->typed_data();
-  double* Q0 = heat->typed_data();
-  std::memset(F0, 0, sizeof(float) * 3 * n);
-  std::memset(T0, 0, sizeof(float) * 3 * n);
+  S* F0 = static_cast<S*>(a.F);
+  S* T0 = static_cast<S*>(a.T);
+  double* Q0 = a.Q;
+  std::memset(F0, 0, sizeof(S) * D * n);
+  std::memset(T0, 0, sizeof(S) * DW * n);
   if (heat_on) std::memset(Q0, 0, sizeof(double) * n);
   const int64_t slots = n * nw;
   int64_t nc = pool.num_threads();
@@ -265,23 +380,25 @@ static ffi::Error ContactsImpl(
   if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nc = std::atoi(e);  // exactly
   if (nc > m) nc = m;
   if (nc < 1) nc = 1;
+  S* MX = static_cast<S*>(a.MX);
   if (nc == 1) {
-    max_ratio->typed_data()[0] = work(0, m, 0, slots, F0, T0, Q0);
-    return ffi::Error::Success();
+    MX[0] = work(0, m, 0, slots, F0, T0, Q0);
+    return;
   }
-  // a buffer holds 6 N floats (forces, torques) in its first 3 N doubles, then N doubles
+  // a buffer holds the (D + DW) N forces and torques in its first fs doubles, then N doubles
+  const int64_t fs = (static_cast<int64_t>(sizeof(S)) * (D + DW) * n + 7) / 8;
   std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
-  for (auto& b : acc) b = take_buffer(4 * n);
-  std::vector<float> mx(nc, 0.f);
+  for (auto& b : acc) b = take_buffer(fs + n);
+  std::vector<S> mx(nc, S(0));
   auto job = std::make_shared<Job>();
   job->nchunks = static_cast<int>(nc);
   job->run = [&](int c) {
-    float *F = F0, *T = T0;
+    S *F = F0, *T = T0;
     double* Q = Q0;
     if (c > 0) {
       double* b = acc[c - 1]->data();
-      F = reinterpret_cast<float*>(b); T = F + 3 * n; Q = b + 3 * n;
-      std::memset(b, 0, sizeof(double) * (heat_on ? 4 : 3) * n);
+      F = reinterpret_cast<S*>(b); T = F + D * n; Q = b + fs;
+      std::memset(b, 0, sizeof(double) * (heat_on ? fs + n : fs));
     }
     mx[c] = work(m * c / nc, m * (c + 1) / nc, slots * c / nc, slots * (c + 1) / nc, F, T, Q);
   };
@@ -290,17 +407,73 @@ static ffi::Error ContactsImpl(
   for (int c = job->next.fetch_add(1); c < job->nchunks; c = job->next.fetch_add(1)) job->run(c);
   job->closed.store(true);
   while (job->active.load() != 0) std::this_thread::yield();
-  float max_ov = mx[0];
+  S max_ov = mx[0];
   for (int64_t c = 1; c < nc; ++c) {
     const double* b = acc[c - 1]->data();
-    const float* a = reinterpret_cast<const float*>(b);
-    for (int64_t q = 0; q < 3 * n; ++q) { F0[q] += a[q]; T0[q] += a[3 * n + q]; }
+    const S* f = reinterpret_cast<const S*>(b);
+    for (int64_t q = 0; q < D * n; ++q) F0[q] += f[q];
+    for (int64_t q = 0; q < DW * n; ++q) T0[q] += f[D * n + q];
     if (heat_on)
-      for (int64_t q = 0; q < n; ++q) Q0[q] += b[3 * n + q];
+      for (int64_t q = 0; q < n; ++q) Q0[q] += b[fs + q];
     if (mx[c] > max_ov) max_ov = mx[c];
   }
   for (auto& b : acc) give_buffer(std::move(b));
-  max_ratio->typed_data()[0] = max_ov;
+  MX[0] = max_ov;
+}
+
+}  // namespace
+
+static ffi::Error ContactsImpl(
+    ffi::ThreadPool pool, ffi::AnyBuffer pos, ffi::AnyBuffer vel, ffi::AnyBuffer omg,
+    ffi::AnyBuffer rad, ffi::AnyBuffer mass, ffi::AnyBuffer inertia, ffi::Buffer<ffi::S32> ptype,
+    ffi::Buffer<ffi::S32> pairs, ffi::AnyBuffer spring, ffi::AnyBuffer wdist, ffi::AnyBuffer wnrm,
+    ffi::AnyBuffer wvel, ffi::AnyBuffer wspring, ffi::AnyBuffer tab_pp, ffi::AnyBuffer tab_pw,
+    ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, double dt, double L, int32_t law,
+    double h, double tol, int32_t rot, ffi::Result<ffi::AnyBuffer> force,
+    ffi::Result<ffi::AnyBuffer> torque, ffi::Result<ffi::AnyBuffer> nspring,
+    ffi::Result<ffi::AnyBuffer> ovl_out, ffi::Result<ffi::AnyBuffer> dist_out,
+    ffi::Result<ffi::AnyBuffer> fn_out, ffi::Result<ffi::AnyBuffer> nwspring,
+    ffi::Result<ffi::AnyBuffer> wovl_out, ffi::Result<ffi::AnyBuffer> wfn_out,
+    ffi::Result<ffi::AnyBuffer> max_ratio, ffi::ResultBuffer<ffi::F64> heat) {
+  const ffi::DataType et = pos.element_type();
+  if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
+    return ffi::Error::InvalidArgument("drumheat_contacts: positions must be f32 or f64");
+  for (const ffi::AnyBuffer* b : {&vel, &omg, &rad, &mass, &inertia, &spring, &wdist, &wnrm,
+                                  &wvel, &wspring, &tab_pp, &tab_pw, &wall_omega})
+    if (b->element_type() != et)
+      return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
+  for (ffi::Result<ffi::AnyBuffer>* b : {&force, &torque, &nspring, &ovl_out, &dist_out,
+                                               &fn_out, &nwspring, &wovl_out, &wfn_out,
+                                               &max_ratio})
+    if ((*b)->element_type() != et)
+      return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
+  const auto pd = pos.dimensions();
+  if (pd.size() != 2 || (pd[1] != 2 && pd[1] != 3))
+    return ffi::Error::InvalidArgument("drumheat_contacts: positions must be (N, 2) or (N, 3)");
+  const int dim = static_cast<int>(pd[1]);
+  Call a;
+  a.x = pos.untyped_data(); a.v = vel.untyped_data(); a.w = omg.untyped_data();
+  a.r = rad.untyped_data(); a.ms = mass.untyped_data(); a.in = inertia.untyped_data();
+  a.sp = spring.untyped_data(); a.wd = wdist.untyped_data(); a.wn = wnrm.untyped_data();
+  a.wv = wvel.untyped_data(); a.ws = wspring.untyped_data(); a.tpp = tab_pp.untyped_data();
+  a.tpw = tab_pw.untyped_data(); a.wom = wall_omega.untyped_data();
+  a.pt = ptype.typed_data(); a.P = pairs.typed_data(); a.temp = temp.typed_data();
+  a.F = force->untyped_data(); a.T = torque->untyped_data(); a.S = nspring->untyped_data();
+  a.OV = ovl_out->untyped_data(); a.DI = dist_out->untyped_data();
+  a.FN = fn_out->untyped_data(); a.WS = nwspring->untyped_data();
+  a.WO = wovl_out->untyped_data(); a.WF = wfn_out->untyped_data();
+  a.MX = max_ratio->untyped_data(); a.Q = heat->typed_data();
+  a.n = pd[0];
+  a.m = pairs.dimensions()[1];
+  a.nw = wdist.dimensions().size() > 1 ? wdist.dimensions()[1] : 0;
+  a.nt = tab_pp.dimensions()[1];
+  a.dt = dt; a.L = L; a.h = h; a.tol = tol; a.law = law; a.rot = rot != 0;
+  const bool f64 = et == ffi::DataType::F64;
+  if (dim == 3) {
+    if (f64) run<double, 3>(pool, a); else run<float, 3>(pool, a);
+  } else {
+    if (f64) run<double, 2>(pool, a); else run<float, 2>(pool, a);
+  }
   return ffi::Error::Success();
 }
 
@@ -308,15 +481,16 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
     Contacts, ContactsImpl,
     ffi::Ffi::Bind()
         .Ctx<ffi::ThreadPool>()
-        .Arg<ffi::Buffer<ffi::F32>>().Arg<ffi::Buffer<ffi::F32>>().Arg<ffi::Buffer<ffi::F32>>()
-        .Arg<ffi::Buffer<ffi::F32>>().Arg<ffi::Buffer<ffi::F32>>().Arg<ffi::Buffer<ffi::S32>>()
-        .Arg<ffi::Buffer<ffi::F32>>()
-        .Arg<ffi::Buffer<ffi::F32>>().Arg<ffi::Buffer<ffi::F32>>().Arg<ffi::Buffer<ffi::F32>>()
-        .Arg<ffi::Buffer<ffi::F32>>().Arg<ffi::Buffer<ffi::F32>>().Arg<ffi::Buffer<ffi::F64>>()
-        .Attr<float>("kn").Attr<float>("kt").Attr<float>("zn").Attr<float>("zt")
-        .Attr<float>("mu").Attr<float>("dt").Attr<float>("L")
-        .Attr<int32_t>("law").Attr<double>("h")
-        .Ret<ffi::Buffer<ffi::F32>>().Ret<ffi::Buffer<ffi::F32>>().Ret<ffi::Buffer<ffi::F32>>()
-        .Ret<ffi::Buffer<ffi::F32>>().Ret<ffi::Buffer<ffi::F32>>().Ret<ffi::Buffer<ffi::F32>>()
-        .Ret<ffi::Buffer<ffi::F32>>().Ret<ffi::Buffer<ffi::F32>>().Ret<ffi::Buffer<ffi::F32>>()
-        .Ret<ffi::Buffer<ffi::F32>>().Ret<ffi::Buffer<ffi::F64>>());
+        .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
+        .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
+        .Arg<ffi::Buffer<ffi::S32>>().Arg<ffi::Buffer<ffi::S32>>()
+        .Arg<ffi::AnyBuffer>()
+        .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
+        .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
+        .Arg<ffi::Buffer<ffi::F64>>()
+        .Attr<double>("dt").Attr<double>("L").Attr<int32_t>("law").Attr<double>("h")
+        .Attr<double>("tol").Attr<int32_t>("rot")
+        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
+        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
+        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
+        .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>());

@@ -3,27 +3,37 @@
 On XLA:CPU the JAX force kernel of :mod:`drumheat.mechanics.integrator` runs as some twenty
 passes over the pair slots plus scatter-adds, about a third of LIGGGHTS' speed per core
 (docs/performance.md). ``contact_kernel.cc`` computes the same contact law
-(:func:`drumheat.mechanics.contact_forces.contact_law`) for the particle-particle pairs and
-the particle-wall contacts in one loop, called through ``jax.ffi`` (an XLA custom call); the
-wall geometry (distance, normal, surface velocity of every wall at every particle) still comes
-from the JAX walls, so every wall type works. With ``make_dem(..., conduction=...)`` the same
-loop sums the contact heat flows (:mod:`drumheat.mechanics.conduction`). The loop is cut into
-as many chunks as XLA's intra-op thread pool has threads (at most one per 8 000 pair slots;
-``DRUMHEAT_KERNEL_THREADS`` sets the number) and run on that pool, so no threads are started
-per step; each chunk sums into its own buffer and the buffers are added in chunk order, so the
-result depends on the chunk count by round-off and on nothing else. The pair and wall springs
-are updated in place (aliased buffers). Speed: docs/performance.md
-(``scripts/bench_cpu_pair_kernel.py`` kernel against kernel, ``scripts/bench_vs_liggghts.py``
-the whole step against LIGGGHTS).
+(:func:`drumheat.mechanics.contact_forces.contact_law` and
+:func:`~drumheat.mechanics.contact_forces.rolling_torque`: Weigler digest,
+shared/reference/weigler-thermal-dem.md sec. 4 [2.1]-[2.4] and sec. 5; LIGGGHTS ``hooke`` with
+tangential history, shared/peers/liggghts/README.md) for the particle-particle pairs and the
+particle-wall contacts in one loop, called through ``jax.ffi`` (an XLA custom call); the wall
+geometry (distance, normal, surface velocity of every wall at every particle) still comes from
+the JAX walls, so every wall type works. With ``make_dem(..., conduction=...)`` the same loop
+sums the contact heat flows (:mod:`drumheat.mechanics.conduction`, both laws, with its gap
+tolerance). The loop is cut into as many chunks as XLA's intra-op thread pool has threads (at
+most one per 8 000 pair slots; ``DRUMHEAT_KERNEL_THREADS`` sets the number) and run on that
+pool, so no threads are started per step; each chunk sums into its own buffer and the buffers
+are added in chunk order, so the result depends on the chunk count by round-off and on nothing
+else. The pair and wall springs are updated in place (aliased buffers). Speed:
+docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
+``scripts/bench_vs_liggghts.py`` the whole step against LIGGGHTS).
 
-Scope: 3D, one material (single-row contact tables), no rolling resistance, float32 mechanics,
-the CPU backend, single runs (not under ``vmap``, not differentiable). :func:`check_supported`
-says why a configuration is refused. The JAX kernel stays the reference and the path for GPUs,
-ensembles and everything else; ``tests/test_cpu_kernel.py`` holds the two equal to round-off.
+Scope: 2D (monolayer: x-y, spin about z) and 3D, float32 and float64 mechanics, any number of
+materials (per-type contact tables), rolling resistance, walls, pair conduction, optional
+periodic z; the CPU backend and single runs (not under ``vmap``, not differentiable).
+:func:`check_supported` says why a configuration is refused (:func:`unsupported_reasons`
+without raising). The JAX kernel stays the reference and the path for GPUs, ensembles and
+everything else; ``tests/test_cpu_kernel.py`` holds the two equal to round-off.
 
-The source is compiled with ``g++ -O3 -fno-math-errno`` on first use into
-``$DRUMHEAT_CACHE_DIR/kernels`` (default ``~/.cache/drumheat/kernels``), named by the hash of
-the source, the flags and the jaxlib version, and registered once per process.
+Build: :func:`available` compiles the source with ``$CXX`` (else the first of ``g++``, ``c++``,
+``clang++`` on the PATH) and ``-O3 -fno-math-errno`` on first use into
+``$DRUMHEAT_CACHE_DIR/kernels`` (default ``~/.cache/drumheat/kernels``), named by the hash of the
+source, the flags and the jaxlib version, under a file lock (parallel processes build it once),
+loads and registers it; a kernel already in the cache needs no compiler. Its answer
+``(ok, reason)`` is kept for the process, so later calls cost nothing; when no compiler is found
+or the build fails it answers ``(False, reason)`` in one sentence (the compiler's full output is
+left in a ``.log`` beside the library) and raises nothing.
 """
 
 from __future__ import annotations
@@ -31,8 +41,11 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import shlex
 import shutil
 import subprocess
+import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import jax
@@ -40,11 +53,16 @@ import jax.numpy as jnp
 import numpy as np
 from drumheat.environment import cache_dir_setting
 
-__all__ = ["TARGET", "available", "check_supported", "contacts", "load"]
+__all__ = ["TARGET", "available", "check_supported", "contacts", "kernel_params", "load",
+           "unsupported_reasons"]
 
 TARGET = "drumheat_contacts"
 SOURCE = Path(__file__).with_name("contact_kernel.cc")
-_LOADED = False
+FLAGS = ("-O3", "-fno-math-errno", "-shared", "-fPIC", "-std=c++17", "-w")
+COMPILERS = ("g++", "c++", "clang++")
+COMPILE_TIMEOUT_S = 600
+_STATE: tuple[bool, str] | None = None  # the answer of available(), once known
+_REGISTERED: str | None = None  # the library registered as TARGET in this process
 
 
 def _cache_dir() -> Path:
@@ -52,105 +70,219 @@ def _cache_dir() -> Path:
     return (Path(env) if env else Path.home() / ".cache" / "drumheat") / "kernels"
 
 
-def available() -> tuple[bool, str]:
-    """Whether the kernel can be used here, and why not: ``(ok, reason)``."""
+def _compiler() -> tuple[list[str] | None, str]:
+    """The compiler command (``$CXX`` may hold words, e.g. ``ccache g++``), or None and why."""
+    cxx = os.environ.get("CXX", "").strip()
+    if cxx:
+        words = shlex.split(cxx)
+        path = shutil.which(words[0])
+        if path is None:
+            return None, f"the C++ compiler $CXX = {cxx!r} is not on the PATH"
+        return [path, *words[1:]], ""
+    for name in COMPILERS:
+        path = shutil.which(name)
+        if path is not None:
+            return [path], ""
+    return None, f"no C++ compiler found ($CXX unset, none of {', '.join(COMPILERS)} on the PATH)"
+
+
+def _library_path() -> Path:
+    import jaxlib
+
+    key = hashlib.sha256("\n".join([SOURCE.read_text(), jaxlib.__version__, *FLAGS]).encode())
+    return _cache_dir() / f"contact_kernel_{key.hexdigest()[:16]}.so"
+
+
+@contextmanager
+def _file_lock(path: Path):
+    """An exclusive lock on ``path`` across processes (fcntl; a no-op where there is none)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _build(out: Path) -> str:
+    """Compile the kernel into ``out`` unless it is there; return '' or why it failed."""
+    if out.exists():
+        return ""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        return f"the kernel cache folder {out.parent} cannot be created ({e.strerror})"
+    with _file_lock(out.with_suffix(".lock")):
+        if out.exists():  # another process built it while this one waited
+            return ""
+        cmd, why = _compiler()
+        if cmd is None:
+            return why
+        include = Path(jax.ffi.include_dir())
+        if not (include / "xla" / "ffi" / "api" / "ffi.h").exists():
+            return f"jaxlib ships no XLA FFI headers (looked in {include})"
+        tmp = out.with_suffix(f".{os.getpid()}.tmp")
+        log = out.with_suffix(".log")
+        full = [*cmd, *FLAGS, f"-I{include}", str(SOURCE), "-o", str(tmp)]
+        t0 = time.perf_counter()
+        try:
+            proc = subprocess.run(full, capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S)
+        except (OSError, subprocess.TimeoutExpired) as e:
+            tmp.unlink(missing_ok=True)
+            return f"the C++ compiler {cmd[0]} could not build the kernel ({e})"
+        log.write_text(f"$ {shlex.join(full)}\n# exit {proc.returncode} after "
+                       f"{time.perf_counter() - t0:.1f} s\n{proc.stdout}{proc.stderr}")
+        if proc.returncode != 0 or not tmp.exists():
+            tmp.unlink(missing_ok=True)
+            err = proc.stderr.strip().splitlines()
+            first = next((ln for ln in err if ": error" in ln or ": fatal error" in ln),
+                         err[0] if err else "no message").strip()
+            return (f"compiling the C++ contact kernel with {cmd[0]} failed (exit "
+                    f"{proc.returncode}: {first[:300]}; full output in {log})")
+        os.replace(tmp, out)  # atomic: a reader sees the whole library or none
+        log.unlink(missing_ok=True)  # a log is left only where a build failed
+    return ""
+
+
+def _probe() -> tuple[bool, str]:
+    global _REGISTERED
     if jax.default_backend() != "cpu":
         return False, f"the default JAX backend is {jax.default_backend()!r}, not 'cpu'"
-    if shutil.which(os.environ.get("CXX", "g++")) is None:
-        return False, "no C++ compiler (g++ or $CXX) on the PATH"
-    if not (Path(jax.ffi.include_dir()) / "xla" / "ffi" / "api" / "ffi.h").exists():
-        return False, "jaxlib ships no XLA FFI headers"
+    if _REGISTERED is not None:  # registered earlier in this process (a target is for good)
+        return True, ""
+    out = _library_path()
+    why = _build(out)
+    if why:
+        return False, why
+    try:
+        lib = ctypes.cdll.LoadLibrary(str(out))
+        jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(lib.Contacts), platform="cpu")
+    except (OSError, AttributeError) as e:
+        return False, f"the compiled C++ contact kernel {out} cannot be loaded ({e})"
+    _REGISTERED = str(out)
     return True, ""
 
 
-def load() -> str:
-    """Compile (once, cached on disk) and register the kernel; return its FFI target name.
+def available() -> tuple[bool, str]:
+    """Whether the kernel can be used here, and why not: ``(ok, reason)``; never raises.
 
-    Raises RuntimeError with the compiler's message if it cannot be built.
+    The first call builds (or finds in the cache) and registers the kernel, about 20 s when it
+    must compile; the answer is kept, so later calls are free (a ``contact_backend = "auto"``
+    may ask every time it builds a DEM).
     """
-    global _LOADED
-    if _LOADED:
-        return TARGET
+    global _STATE
+    if _STATE is None:
+        try:
+            _STATE = _probe()
+        except Exception as e:  # noqa: BLE001 - the contract is an answer, not an exception
+            _STATE = (False, f"the C++ contact kernel could not be prepared ({type(e).__name__}: "
+                             f"{e})")
+    return _STATE
+
+
+def load() -> str:
+    """Build and register the kernel (see :func:`available`); return its FFI target name.
+
+    Raises RuntimeError naming the reason when it cannot be used.
+    """
     ok, why = available()
     if not ok:
         raise RuntimeError(f"the C++ contact kernel is not available: {why}")
-    src = SOURCE.read_text()
-    import jaxlib
-
-    flags = ["-O3", "-fno-math-errno", "-shared", "-fPIC", "-std=c++17", "-w"]
-    key = hashlib.sha256("\n".join([src, jaxlib.__version__] + flags).encode()).hexdigest()[:16]
-    out = _cache_dir() / f"contact_kernel_{key}.so"
-    if not out.exists():
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_suffix(f".{os.getpid()}.tmp")
-        cmd = [os.environ.get("CXX", "g++"), *flags, f"-I{jax.ffi.include_dir()}", str(SOURCE),
-               "-o", str(tmp)]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise RuntimeError("compiling the C++ contact kernel failed:\n" + proc.stderr[-2000:])
-        os.replace(tmp, out)  # atomic: parallel test workers may build at once
-    lib = ctypes.cdll.LoadLibrary(str(out))
-    jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(lib.Contacts), platform="cpu")
-    _LOADED = True
     return TARGET
 
 
-def check_supported(dim, params, dtype, batch_axis) -> None:
-    """Raise ValueError naming every reason why ``pair_kernel="cpu"`` cannot serve."""
+def unsupported_reasons(dim, params, dtype, batch_axis) -> list[str]:
+    """Why ``pair_kernel="cpu"`` cannot serve this configuration (empty: it can)."""
     reasons = []
-    if dim != 3:
-        reasons.append("it is written for 3D (dim = 3)")
-    if params.n_types != 1:
-        reasons.append("it takes one material (single-row contact tables)")
-    if params.uses_rolling():
-        reasons.append("it has no rolling resistance")
-    if jnp.dtype(dtype) != jnp.float32:
-        reasons.append("it runs float32 mechanics (dtype=jnp.float32)")
+    if dim not in (2, 3):
+        reasons.append(f"it is written for 2D and 3D, not dim = {dim}")
+    if jnp.dtype(dtype) not in (jnp.float32, jnp.float64):
+        reasons.append(f"it runs float32 or float64 mechanics, not {jnp.dtype(dtype).name}")
     if batch_axis is not None:
         reasons.append("it does not batch under vmap (ensembles use the JAX kernel)")
     ok, why = available()
     if not ok:
         reasons.append(why)
+    return reasons
+
+
+def check_supported(dim, params, dtype, batch_axis) -> None:
+    """Raise ValueError naming every reason why ``pair_kernel="cpu"`` cannot serve."""
+    reasons = unsupported_reasons(dim, params, dtype, batch_axis)
     if reasons:
         raise ValueError("pair_kernel='cpu' cannot be used: " + "; ".join(reasons)
                          + ". Use pair_kernel='jax'.")
 
 
-def contacts(pos, vel, omega, radius, mass, idx, spring, wall_distance, wall_normal,
-             wall_velocity, wall_spring, wall_params, *, kn, kt, zeta_n, zeta_t, mu, dt,
-             periodic_length=None, temperature=None, conduction_law=None, conduction_h=0.0):
-    """Particle-particle and particle-wall contact forces in one C++ loop (float32).
+_TABLES = ("kn", "kt", "zeta_n", "zeta_t", "mu", "mu_roll")
+
+
+def kernel_params(params, n_walls, dtype, dt, wall_omega, periodic_length=None,
+                  rotation=True) -> dict:
+    """The static inputs of :func:`contacts` for a DEM: ``params`` (ContactParams) as the
+    particle-particle tables (6, T, T) and the particle-wall tables (6, T, W) (the JAX kernel's
+    ``table`` / ``wall_table``: kn, kt, zeta_n, zeta_t, mu, mu_roll), the walls' angular
+    velocities about z (W,) rad/s, dt, the period of z and whether spins are integrated."""
+    T = params.n_types
+    pp = np.stack([np.broadcast_to(np.asarray(getattr(params, f"{k}_pp"), float), (T, T))
+                   for k in _TABLES])
+    pw = np.stack([np.broadcast_to(np.asarray(getattr(params, f"{k}_pw"), float), (T, n_walls))
+                   for k in _TABLES])
+    return dict(tables_pp=jnp.asarray(pp, dtype), tables_pw=jnp.asarray(pw, dtype),
+                wall_omega=jnp.asarray(np.asarray(wall_omega, float).reshape(n_walls), dtype),
+                dt=float(dt), periodic_length=periodic_length, rotation=bool(rotation))
+
+
+def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_distance,
+             wall_normal, wall_velocity, wall_spring, *, tables_pp, tables_pw, wall_omega, dt,
+             periodic_length=None, rotation=True, temperature=None, conduction_law=None,
+             conduction_h=0.0, gap_tolerance=0.0):
+    """Particle-particle and particle-wall contact forces in one C++ loop.
+
+    The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
+    to it.
 
     Args:
-      pos, vel, omega: positions, velocities, spins (N, 3).
-      radius, mass: (N,).
-      idx: (2, M) OrderedSparse neighbour pairs (padding N); spring: (M, 3) tangential springs.
+      pos, vel: positions, velocities (N, D), D = 2 or 3; omega: spins (N, 3), or (N,) about z
+        in 2D.
+      radius, mass, inertia: (N,); ptype: material type of each particle (N,) int.
+      idx: (2, M) OrderedSparse neighbour pairs (padding N); spring: (M, D) tangential springs.
       wall_distance: (N, W) distance of each particle centre from each wall; wall_normal:
-        (N, W, 3) unit normal from the wall towards the particle; wall_velocity: (N, W, 3)
+        (N, W, D) unit normal from the wall towards the particle; wall_velocity: (N, W, D)
         velocity of the wall surface at the particle (the three outputs of each wall's
-        ``evaluate``, stacked over the walls); wall_spring: (N, W, 3) tangential springs.
-      wall_params: (5, W) per wall ``kn, kt, zeta_n, zeta_t, mu``.
-      kn, kt, zeta_n, zeta_t, mu, dt: particle-particle contact parameters as in
-        :func:`drumheat.mechanics.contact_forces.contact_law`; periodic_length of z or None.
-      temperature, conduction_law, conduction_h: with a law (``"projected"`` or ``"overlap"``,
-        :mod:`drumheat.mechanics.conduction`), the heat flow through the touching pairs at the
-        temperatures (N,) float64 is summed in the same loop.
+        ``evaluate``, stacked over the walls); wall_spring: (N, W, D) tangential springs.
+      tables_pp, tables_pw, wall_omega, dt, periodic_length, rotation: from
+        :func:`kernel_params`.
+      temperature, conduction_law, conduction_h, gap_tolerance: with a law (``"projected"`` or
+        ``"overlap"``, :mod:`drumheat.mechanics.conduction`), the heat flow through the
+        conducting pairs (overlapping, or with a gap of at most ``gap_tolerance`` times the
+        smaller diameter) at the temperatures (N,) float64 is summed in the same loop.
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
-    wall_overlap, wall_normal_force, max_overlap, heat)``: contact forces and torques on the
-    particles (N, 3); per pair the new springs (M, 3), overlap, centre distance and normal force
-    (M); per wall slot the new springs (N, W, 3), overlap and normal force (N, W); all zero where
-    nothing touches; the largest overlap / radius (the smaller radius of a pair) (1,); and the
-    heat flow into each particle (N,) float64, W (length 0 without a conduction law).
+    wall_overlap, wall_normal_force, max_overlap, heat)``: contact forces (N, D) and torques
+    (N, 3) or (N,) on the particles (torques zero without ``rotation``); per pair the new
+    springs (M, D), overlap, centre distance and normal force (M); per wall slot the new springs
+    (N, W, D), overlap and normal force (N, W); all zero where nothing touches; the largest
+    overlap / radius (the smaller radius of a pair) (1,); and the heat flow into each particle
+    (N,) float64, W (length 0 without a conduction law).
     """
     target = load()
-    n, m = pos.shape[0], idx.shape[1]
+    dtype = jnp.dtype(pos.dtype)
+    if dtype not in (jnp.float32, jnp.float64):
+        dtype = jnp.dtype(jnp.float32)
+    n, dim = pos.shape
+    m = idx.shape[1]
     nw = wall_distance.shape[1]
-    f32 = jnp.float32
     sd = jax.ShapeDtypeStruct
-    outs = [sd((n, 3), f32), sd((n, 3), f32), sd((m, 3), f32), sd((m,), f32), sd((m,), f32),
-            sd((m,), f32), sd((n, nw, 3), f32), sd((n, nw), f32), sd((n, nw), f32),
-            sd((1,), f32)]
+    wshape = (n, 3) if dim == 3 else (n,)
+    outs = [sd((n, dim), dtype), sd(wshape, dtype), sd((m, dim), dtype), sd((m,), dtype),
+            sd((m,), dtype), sd((m,), dtype), sd((n, nw, dim), dtype), sd((n, nw), dtype),
+            sd((n, nw), dtype), sd((1,), dtype)]
     if conduction_law is None:
         law, temperature = -1, jnp.zeros((0,), jnp.float64)
     else:
@@ -158,12 +290,13 @@ def contacts(pos, vel, omega, radius, mass, idx, spring, wall_distance, wall_nor
 
         law = LAWS.index(conduction_law)
     outs.append(sd((temperature.shape[0],), jnp.float64))
-    c = lambda v: np.float32(v)  # noqa: E731
-    # springs updated in place: input 6 -> output 2 (pairs), input 10 -> output 6 (walls)
-    return jax.ffi.ffi_call(target, outs, input_output_aliases={6: 2, 10: 6})(
-        pos.astype(f32), vel.astype(f32), omega.astype(f32), radius.astype(f32),
-        mass.astype(f32), idx.astype(jnp.int32), spring.astype(f32),
-        wall_distance.astype(f32), wall_normal.astype(f32), wall_velocity.astype(f32),
-        wall_spring.astype(f32), wall_params.astype(f32), temperature.astype(jnp.float64),
-        kn=c(kn), kt=c(kt), zn=c(zeta_n), zt=c(zeta_t), mu=c(mu), dt=c(dt),
-        L=c(periodic_length or 0.0), law=np.int32(law), h=np.float64(conduction_h))
+    c = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
+    # springs updated in place: input 8 -> output 2 (pairs), input 12 -> output 6 (walls)
+    return jax.ffi.ffi_call(target, outs, input_output_aliases={8: 2, 12: 6})(
+        c(pos), c(vel), c(omega).reshape(wshape), c(radius), c(mass), c(inertia),
+        jnp.asarray(ptype).astype(jnp.int32), idx.astype(jnp.int32), c(spring),
+        c(wall_distance), c(wall_normal), c(wall_velocity), c(wall_spring), c(tables_pp),
+        c(tables_pw), c(wall_omega), temperature.astype(jnp.float64),
+        dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
+        h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
+        rot=np.int32(bool(rotation)))

@@ -555,9 +555,10 @@ def make_dem(
       pair_kernel: ``"jax"`` (default; every backend, vmap, any material table) or ``"cpu"``:
         the particle-particle and particle-wall contacts (and the conduction) in one C++ loop
         on XLA's CPU threads, called through ``jax.ffi`` (:mod:`drumheat.mechanics.cpu_kernel`;
-        the DEM step 2.3-5.9x faster on CPU, docs/performance.md; 3D, one material, no rolling
-        resistance, float32, single runs; compiled with g++ on first use). Same contact law;
-        results agree with ``"jax"`` to float32 round-off.
+        the DEM step 2.3-5.9x faster on CPU, docs/performance.md; 2D and 3D, float32 and
+        float64, any materials, rolling resistance; single runs, not under vmap; compiled with
+        g++ on first use, ``cpu_kernel.available()`` says whether it can be). Same contact law;
+        results agree with ``"jax"`` to round-off.
       conduction: :class:`~drumheat.mechanics.conduction.PairConduction`: heat conduction
         through the touching pairs every step (:mod:`drumheat.mechanics.conduction`); the
         state's ``extra`` is then the particle temperatures (N,), float64, advanced after the
@@ -624,6 +625,8 @@ def make_dem(
     r_min = float(np.min(radius_np))
     skin = 0.5 * r_max if skin is None else float(skin)
     cutoff = 2.0 * r_max + skin
+    if conduction is not None:  # pairs that conduct across a gap must be in the neighbour list
+        cutoff += conduction.gap_tolerance * 2.0 * r_max
     if bounds is None:
         lo, hi = wall_bounds(walls, dim)
     else:
@@ -682,11 +685,9 @@ def make_dem(
         return tab[ptype]
 
     if use_cpu_kernel:
-        cpu_params = {k: float(np.asarray(getattr(params, f"{k}_pp"))[0, 0])
-                      for k in ("kn", "kt", "zeta_n", "zeta_t", "mu")}
-        cpu_params["dt"] = float(dt)
-        cpu_wall_params = jnp.stack([wall_table(getattr(params, f"{k}_pw"))[0]
-                                     for k in ("kn", "kt", "zeta_n", "zeta_t", "mu")])
+        # the C++ kernel's contact tables, wall spins, dt, period and rotation flag
+        cpu_params = cpu_kernel.kernel_params(params, n_w, dtype, dt, wall_omega,
+                                              periodic_length, rotation)
 
     def forces(pos, vel, w, t, nbrs, pair_spring, wall_spring, vel_h=None, w_h=None,
                temperature=None):
@@ -708,11 +709,11 @@ def make_dem(
             heat_args = {}
             if conduction is not None and temperature is not None:
                 heat_args = dict(temperature=temperature, conduction_law=conduction.law,
-                                 conduction_h=conduction.coefficient)
+                                 conduction_h=conduction.coefficient,
+                                 gap_tolerance=conduction.gap_tolerance)
             (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx,
-             heat) = cpu_kernel.contacts(pos, vel, w, radius, mass, nbrs.idx, pair_spring, wd,
-                                         wn, wv, wall_spring, cpu_wall_params,
-                                         periodic_length=periodic_length, **cpu_params,
+             heat) = cpu_kernel.contacts(pos, vel, w, radius, mass, inertia, ptype, nbrs.idx,
+                                         pair_spring, wd, wn, wv, wall_spring, **cpu_params,
                                          **heat_args)
             force = force + fk
             torque = torque + tk
@@ -722,6 +723,7 @@ def make_dem(
         else:
             force, torque, new_spring, ovl, dist, fn, active, max_ovl = pair_part(
                 pos, vel, w, nbrs, pair_spring, vel_h, w_h, split_h, force, torque, i, j)
+            pair_dist = dist  # every pair's, for the conduction gap tolerance (heat_flow)
             ovl = jnp.where(active, ovl, 0.0)
             dist = jnp.where(active, dist, 0.0)
             wall_out = wall_part(pos, vel, w, t, wall_spring, vel_h, w_h, split_h, force,
@@ -737,7 +739,7 @@ def make_dem(
             heat = None
         elif not in_kernel:
             heat = pair_heat_flow(temperature, contacts, particles.radius, conduction.law,
-                                  conduction.coefficient)
+                                  conduction.coefficient, conduction.gap_tolerance, pair_dist)
         return force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat
 
     def pair_part(pos, vel, w, nbrs, pair_spring, vel_h, w_h, split_h, force, torque, i, j):
