@@ -18,6 +18,7 @@ from drumheat._version import __version__
 from drumheat.assemble import temperature_bounds
 from drumheat.motion.trajectory import Trajectory
 from drumheat.results import observe
+from drumheat.results.equalisation import equalisation_times
 from drumheat.results.files import write_results
 from drumheat.scene import Scene
 
@@ -165,6 +166,10 @@ def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
     }
     summary.update({k: float(v) for k, v in ts.iloc[-1].items() if k != "t"})
     summary["max_principle"] = max_principle(scene, traj)
+    if len(scene.groups) > 1:  # a bed of fractions: when did it equalise, on each criterion
+        gas = scene.gas.temperature if "loss" in scene.heat.effects() else None
+        summary["equalisation"] = equalisation_times(traj.t, traj.T, traj.group, traj.mass,
+                                                     T_gas=gas)
     if not summary["max_principle"]["ok"]:
         warnings.warn(f"scene {scene.name!r}: temperatures left the bounds of the maximum "
                       f"principle ({summary['max_principle']}): the run is not trustworthy (an "
