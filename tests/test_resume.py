@@ -115,6 +115,51 @@ def test_replay_resumes_bit_for_bit(tmp_path, monkeypatch):
     kill_and_resume(scene_from_dict(raw), "replay", 5, tmp_path, monkeypatch)
 
 
+@pytest.mark.parametrize("chunk", [2, 6])  # while coupled / during the replay
+def test_frames_on_disk_resume_bit_for_bit(chunk, tmp_path, monkeypatch):
+    """Every array of every output row spooled to disk (RowSpool.MIN_SIZE = 1): the frames of
+    a stopped run stay in the folder, the checkpoint names them, the resumed run reads them."""
+    from drumheat.motion.rows import RowSpool
+
+    monkeypatch.setattr(RowSpool, "MIN_SIZE", 1)
+    scene = dem_scene(**{"run.duration": 0.4, "run.output_interval": 0.1,
+                         "dem.record_interval": 0.05, "dem.replay_after": 0.2})
+    out = tmp_path / "run"
+    with monkeypatch.context() as m:
+        kill_at(m, "dem", chunk)
+        with pytest.raises(Killed):
+            dh.run(scene, out=out, progress=False)
+    frames = sorted(p.name for p in (out / ".frames").iterdir() if p.name.isdigit())
+    assert frames and frames[0] == "0000000"  # the first row's arrays went to disk
+    with np.load(out / "checkpoint.npz") as ck:  # the checkpoint names them, holds none
+        assert not any(k.startswith("rows/") and ck[k].size > 1 for k in ck.files)
+    with np.load(out / "particles.npz") as part:  # the partial frames of the stopped run
+        assert part["T"].shape[0] == len(pd.read_csv(out / "timeseries.csv"))
+    res = dh.run(scene, out=out, progress=False, resume=True)
+    assert_identical(res, dh.run(scene, progress=False))
+    assert not (out / ".frames").exists()  # the complete result replaced the running folder
+
+
+def test_row_spool_is_a_list_of_rows(tmp_path):
+    from drumheat.motion.rows import RowSpool, stack_arrays, stack_rows
+
+    rows = [{"T": np.arange(6.0) + k, "Q": {"gas": np.float64(k)}} for k in range(4)]
+    spool = RowSpool(tmp_path / "spool", min_size=5)
+    for r in rows:
+        spool.append(r)
+    assert len(spool) == 4 and isinstance(spool[2]["T"], np.memmap)
+    np.testing.assert_array_equal(spool[3]["T"], rows[3]["T"])
+    stacked = stack_rows(spool)
+    np.testing.assert_array_equal(stacked["T"], np.stack([r["T"] for r in rows]))
+    np.testing.assert_array_equal(stacked["Q"]["gas"], [0.0, 1.0, 2.0, 3.0])
+    assert isinstance(stacked["T"], np.memmap)
+    assert stack_arrays(rows, "T", (r["T"] for r in rows)).shape == (4, 6)
+    # a checkpoint's view of it, and the spool rebuilt from it without the later rows
+    again = RowSpool.from_state(tmp_path / "spool", spool.state()[:2], min_size=5)
+    assert len(again) == 2 and not (tmp_path / "spool" / "0000003").exists()
+    np.testing.assert_array_equal(again[1]["T"], rows[1]["T"])
+
+
 def test_checkpoint_of_another_scene_is_refused(tmp_path, monkeypatch):
     scene = load_scene("weigler-static", {"run.duration": 300.0})
     with monkeypatch.context() as m:

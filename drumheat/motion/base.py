@@ -36,6 +36,7 @@ import numpy as np
 
 from drumheat import assemble
 from drumheat.assemble import output_times
+from drumheat.motion.rows import stack_rows
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
 
@@ -149,9 +150,10 @@ class AbstractMotion(abc.ABC):
         new = [_like(t, a) for t, a in zip(jax.tree_util.tree_leaves(dyn), leaves)]
         return eqx.combine(jax.tree_util.tree_unflatten(treedef, new), static), log
 
-    def stack_rows(self, rows: list[dict]) -> dict:
-        """The rows stacked along a leading output axis (host numpy arrays)."""
-        return jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(x) for x in a]), *rows)
+    def stack_rows(self, rows) -> dict:
+        """The rows (a list or a :class:`~drumheat.motion.rows.RowSpool`) stacked along a
+        leading output axis (host arrays; disk-backed for a spool's particle frames)."""
+        return stack_rows(rows)
 
     # -- ensembles --------------------------------------------------------------------------
     def shared(self) -> dict[str, Any]:

@@ -40,6 +40,7 @@ from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_
                                       reset_record)
 from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.replay import Recording
+from drumheat.motion.rows import stack_arrays
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
 
@@ -316,10 +317,11 @@ class DEMBed(DEMMotion):
     def finish(self, rows, log, state) -> Trajectory:
         n_c = self.n_coupled
         recording = log["recording"]
-        T = np.stack([np.asarray(r["T"]) for r in rows])
+        T = stack_arrays(rows, "T", (r["T"] for r in rows))
         Q = {a: np.array([float(r["Q"][a]) for r in rows]) for a in rows[0]["Q"]}
-        pos = [np.asarray(r["position"]) for r in rows[:n_c + 1]]
-        pos += [recording.position_at(int(r["g"])) for r in rows[n_c + 1:]]
+        positions = stack_arrays(rows, "position", (
+            r["position"] if k <= n_c else recording.position_at(int(r["g"]))
+            for k, r in enumerate(rows)))
         n_pairs = [float(r["n_pairs"]) for r in rows[1:n_c + 1]]
         n_wall = [float(r["n_wall"]) for r in rows[1:n_c + 1]]
         if recording is not None:  # not moving in a replay: the recording's means
@@ -331,7 +333,6 @@ class DEMBed(DEMMotion):
         # mean number of wall contacts of the run)
         cum_wall = np.concatenate([[n_wall[0]], np.cumsum(n_wall[1:]) / np.arange(1, len(n_wall))])
         d2 = float(np.mean(self.diameter**2))
-        positions = np.stack(pos)
         extra = {}
         if len(self.scene.groups) == 2:
             extra["interfraction_contacts"] = np.concatenate([

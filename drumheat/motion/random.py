@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from drumheat.motion.base import register
+from drumheat.motion.rows import stack_arrays
 from drumheat.motion.static import StaticBed
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
@@ -190,7 +191,7 @@ class RandomBed(StaticBed):
     def finish(self, rows, log, state) -> Trajectory:
         """Positions follow the particles through the re-mixings."""
         traj = super().finish(rows, log, state)
-        owners = np.stack([np.asarray(r["owner"]) for r in rows])
+        owners = stack_arrays(rows, "owner", (r["owner"] for r in rows))
         pos = self.packing.position
         # particle p sits at position slot_of[p] = argsort(owner)[p]
         traj.position = np.stack([pos[np.argsort(o)] for o in owners])

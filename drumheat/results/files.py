@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from drumheat.motion.rows import stack_arrays
+
 #: the manifest of a result folder: the names of the files and folders drumheat wrote into it
 MANIFEST = ".drumheat-files.json"
 
@@ -40,6 +42,8 @@ _LEGACY_OUTPUTS = ("timeseries.csv", "summary.json", "particles.npz", "scene.tom
 RUN_LOCK = ".drumheat-run.lock"
 #: the checkpoint of a run (drumheat.runner.checkpoint)
 CHECKPOINT = "checkpoint.npz"
+#: folder of a running result that holds its particle frames (drumheat.motion.rows.RowSpool)
+FRAMES = ".frames"
 
 
 class ResultFolderError(ValueError):
@@ -278,7 +282,8 @@ class RunFolder:
     While the run goes, the folder holds ``scene.toml``, ``summary.json`` (``"complete":
     false``), ``timeseries.csv`` growing row by row (flushed; the columns every run has:
     ``t``, ``T_mean``, ``T_mean:<group>``, ``T_min``, ``T_max`` and the heat accounts), the
-    latest ``checkpoint.npz`` and a lock (a second run into the same folder is refused). When
+    latest ``checkpoint.npz``, the particle frames so far in ``.frames/`` (one ``.npy`` per
+    frame and quantity: a long run never holds all its frames in memory) and a lock (a second run into the same folder is refused). When
     the run completes, the complete result replaces all of it (:func:`write_results`). A run
     that stops early (Ctrl-C, an error) leaves what it has, marks the summary incomplete and
     keeps the checkpoint, from which ``drumheat run ... --resume`` continues.
@@ -384,6 +389,12 @@ class RunFolder:
     def checkpoint_path(self) -> Path:
         return self.out / CHECKPOINT
 
+    @property
+    def frames_dir(self) -> Path:
+        """Where the run's particle frames are spooled while it runs
+        (:class:`drumheat.motion.rows.RowSpool`)."""
+        return self.out / FRAMES
+
     # -- the end ------------------------------------------------------------------------------
     def complete(self, result, figures: bool = True) -> Path:
         """Replace the running folder by the complete result; delete the earlier one."""
@@ -439,14 +450,13 @@ def _json_default(x):
 
 def _write_partial_particles(path, times, rows, group, group_names):
     """``particles.npz`` of the rows a stopped run has (``t``, ``T``, ``position``)."""
-    rows = [r for r in rows if "T" in r]
-    if not rows:
+    if not rows or any("T" not in r for r in rows):
         return
     arrays = dict(t=np.asarray(times[:len(rows)], float),
-                  T=np.stack([np.asarray(r["T"]) for r in rows]), group=group,
+                  T=stack_arrays(rows, "T", (r["T"] for r in rows)), group=group,
                   group_names=np.array(group_names))
     if all("position" in r for r in rows):
-        arrays["position"] = np.stack([np.asarray(r["position"]) for r in rows])
+        arrays["position"] = stack_arrays(rows, "position", (r["position"] for r in rows))
     tmp = path.with_name(".particles.npz.writing")
     with open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)

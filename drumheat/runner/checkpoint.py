@@ -3,7 +3,8 @@
 A checkpoint holds the complete state of a run at a chunk boundary (the motion model's state:
 positions, velocities, spins, springs, neighbour lists, temperatures, shell profiles, heat
 accounts, the random state it carries), the host-side log (e.g. the contact recording so far),
-the output rows so far, the scene as run and the drumheat version. It is one ``.npz`` file of
+the output rows so far (their particle frames stay in the result folder's spool, see
+:mod:`drumheat.motion.rows`), the scene as run and the drumheat version. It is one ``.npz`` file of
 arrays (never a pickle) written atomically (a temporary file renamed into place), so a run
 killed while writing leaves the previous checkpoint intact.
 
@@ -26,6 +27,7 @@ import numpy as np
 
 from drumheat._version import __version__
 from drumheat.devices import to_host
+from drumheat.motion.rows import RowSpool, flatten_dict, unflatten_dict
 
 __all__ = ["CHECKPOINT", "CheckpointError", "save_checkpoint", "load_checkpoint",
            "flatten_dict", "unflatten_dict"]
@@ -36,30 +38,6 @@ CHECKPOINT = "checkpoint.npz"
 
 class CheckpointError(ValueError):
     """A checkpoint cannot be used (another scene, another drumheat version, damaged)."""
-
-
-def flatten_dict(tree, prefix: str = "") -> dict:
-    """A nested dict of arrays as ``{"a/b/c": array}`` (keys must not contain ``/``)."""
-    out = {}
-    for k, v in tree.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, dict):
-            out.update(flatten_dict(v, key + "/"))
-        else:
-            out[key] = np.asarray(v)
-    return out
-
-
-def unflatten_dict(flat: dict) -> dict:
-    """The inverse of :func:`flatten_dict`."""
-    out: dict = {}
-    for key, v in flat.items():
-        parts = key.split("/")
-        node = out
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = v
-    return out
 
 
 def state_leaves(state) -> list:
@@ -88,12 +66,15 @@ def save_checkpoint(path: Path, *, scene_toml: str, motion_name: str, chunk: int
         (:meth:`~drumheat.motion.base.AbstractMotion.checkpoint_meta`).
     log_arrays : dict
         The host-side log as arrays (:meth:`~drumheat.motion.base.AbstractMotion.save_log`).
-    rows : list of dict
-        The output rows so far.
+    rows : list of dict or RowSpool
+        The output rows so far (of a spool: its small arrays and the file names of its
+        particle frames, which stay in the spool's folder).
     """
     leaves = state_leaves(state)
     arrays = {f"state/{k}": a for k, a in enumerate(leaves)}
     arrays.update({f"log/{k}": np.asarray(v) for k, v in flatten_dict(log_arrays).items()})
+    if isinstance(rows, RowSpool):
+        rows = rows.state()
     for i, row in enumerate(rows):
         arrays.update({f"rows/{i}/{k}": v for k, v in flatten_dict(row).items()})
     meta = dict(drumheat=__version__, scene=scene_toml, motion=motion_name, chunk=int(chunk),

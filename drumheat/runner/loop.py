@@ -25,6 +25,7 @@ import numpy as np
 
 from drumheat.assemble import group_index, scene_values, thermal_particles
 from drumheat.motion import AbstractMotion, make_motion
+from drumheat.motion.rows import RowSpool
 from drumheat.motion.trajectory import Trajectory
 from drumheat.results.files import CHECKPOINT, RunFolder, check_out_dir
 from drumheat.results.result import Result, make_result
@@ -88,9 +89,13 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
     if resume is None:
         state = motion.initial_state(params)
         log = motion.start_log(state, params)
-        rows, i0 = [jax.device_get(motion.observe(state))], 0
+        rows = monitor.new_rows([]) if monitor is not None else []
+        rows.append(jax.device_get(motion.observe(state)))
+        i0 = 0
     else:
         state, log, rows, i0 = restore(motion, resume, params)
+        if monitor is not None:
+            rows = monitor.new_rows(rows)
     if mesh is not None:
         state = shard_particles(state, mesh, motion.scene.n_particles)
     is_output = output_flags(motion)
@@ -109,7 +114,11 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
                 new, log = motion.between(new, log, t1)
             except BaseException as err:
                 if monitor is not None:  # the last good state: before this chunk
-                    monitor.failed(motion, i, t0, state, log, rows[:n_rows], err)
+                    if isinstance(rows, RowSpool):
+                        rows.truncate(n_rows)
+                    else:
+                        del rows[n_rows:]
+                    monitor.failed(motion, i, t0, state, log, rows, err)
                 raise
             state = new
             if is_output[i + 1] and monitor is not None:
@@ -191,6 +200,11 @@ class FolderMonitor:
 
     def wall_time(self) -> float:
         return time.perf_counter() - self.wall_start
+
+    def new_rows(self, rows: list) -> RowSpool:
+        """The run's output rows, their particle frames in the folder's spool (a resumed run:
+        the checkpoint's ``rows``)."""
+        return RowSpool.from_state(self.folder.frames_dir, rows)
 
     def begin(self, motion, out_times, rows):
         self.out_times = np.asarray(out_times)
