@@ -148,7 +148,8 @@ def main(argv=None) -> int:
     except (FileNotFoundError, IsADirectoryError, PermissionError) as err:
         return _fail(str(err))
     except KeyboardInterrupt:
-        print("interrupted; nothing written", file=sys.stderr)
+        print("interrupted (a run that was writing into a result folder left what it had and "
+              "a checkpoint there)", file=sys.stderr)
         return 130
 
 
