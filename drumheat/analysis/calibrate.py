@@ -472,6 +472,38 @@ def _predict(p: _Prepared, params: dict, grid=None):
     return out
 
 
+def _transforms(scene, keys, x0, bounds, log) -> list:
+    """How each fitted parameter is scaled (:class:`_Transform`): through a logistic map onto
+    its ``bounds``, in log space, or free (see :func:`fit`'s ``bounds`` and ``log``)."""
+    trans = []
+    for k in keys:
+        _, meta = _field_meta(scene, k)
+        if not math.isfinite(x0[k]):
+            raise CalibrationDataError(f"start value {k} = {x0[k]!r} is not a finite number")
+        floor = next(((meta[c], c) for c in ("gt", "ge") if meta.get(c) is not None), None)
+        if k in bounds:
+            lo, hi = map(float, bounds[k])
+            if floor is not None and (lo < floor[0] or (lo == floor[0] and floor[1] == "gt")):
+                raise CalibrationDataError(
+                    f"bounds of {k} = ({lo:g}, {hi:g}) reach values the scene does not allow "
+                    f"(it must be {'>' if floor[1] == 'gt' else '>='} {floor[0]:g}): a fit must "
+                    "not return a value the scene refuses; raise the lower bound")
+            if not lo < x0[k] < hi:
+                raise CalibrationDataError(f"start value {k} = {x0[k]:g} is outside its bounds "
+                                           f"({lo:g}, {hi:g})")
+            trans.append(_Transform(x0[k], "bounded", lo, hi))
+            continue
+        positive = (meta.get("gt") is not None and meta["gt"] >= 0) or (
+            meta.get("ge") is not None and meta["ge"] >= 0)
+        use_log = log.get(k, positive) if isinstance(log, dict) else (
+            positive if log is None else bool(log))
+        if use_log and x0[k] <= 0:
+            raise CalibrationDataError(f"parameter {k} starts at {x0[k]:g}; log-space fitting "
+                                       "needs a start value > 0")
+        trans.append(_Transform(x0[k], "log" if use_log else "free"))
+    return trans
+
+
 def fit(experiments, data=None, params: Sequence[str] | dict | None = None, *,
         bounds: dict | None = None, log: bool | dict | None = None, optimizer: str = "lbfgs",
         max_iter: int = 100, learning_rate: float = 0.05, xtol: float = 1e-9,
@@ -534,33 +566,7 @@ def fit(experiments, data=None, params: Sequence[str] | dict | None = None, *,
     first = prepared[0].scene
     x0 = {k: float(params[k]) if isinstance(params, dict) else check_parameter(first, k)
           for k in keys}
-    bounds = bounds or {}
-    trans = []
-    for k in keys:
-        _, meta = _field_meta(first, k)
-        if not math.isfinite(x0[k]):
-            raise CalibrationDataError(f"start value {k} = {x0[k]!r} is not a finite number")
-        floor = next(((meta[c], c) for c in ("gt", "ge") if meta.get(c) is not None), None)
-        if k in bounds:
-            lo, hi = map(float, bounds[k])
-            if floor is not None and (lo < floor[0] or (lo == floor[0] and floor[1] == "gt")):
-                raise CalibrationDataError(
-                    f"bounds of {k} = ({lo:g}, {hi:g}) reach values the scene does not allow "
-                    f"(it must be {'>' if floor[1] == 'gt' else '>='} {floor[0]:g}): a fit must "
-                    "not return a value the scene refuses; raise the lower bound")
-            if not lo < x0[k] < hi:
-                raise CalibrationDataError(f"start value {k} = {x0[k]:g} is outside its bounds "
-                                           f"({lo:g}, {hi:g})")
-            trans.append(_Transform(x0[k], "bounded", lo, hi))
-            continue
-        positive = (meta.get("gt") is not None and meta["gt"] >= 0) or (
-            meta.get("ge") is not None and meta["ge"] >= 0)
-        use_log = log.get(k, positive) if isinstance(log, dict) else (
-            positive if log is None else bool(log))
-        if use_log and x0[k] <= 0:
-            raise CalibrationDataError(f"parameter {k} starts at {x0[k]:g}; log-space fitting "
-                                       "needs a start value > 0")
-        trans.append(_Transform(x0[k], "log" if use_log else "free"))
+    trans = _transforms(first, keys, x0, bounds or {}, log)
 
     def theta_of(u):
         return {k: tr.to_theta(u[i]) for i, (k, tr) in enumerate(zip(keys, trans))}
