@@ -304,6 +304,7 @@ class DEMSetup(NamedTuple):
     dtype: Any
     gravity: np.ndarray
     density: np.ndarray
+    conduction_gap: tuple[float, float]
 
 
 def dem_setup(scene: Scene) -> DEMSetup:
@@ -322,7 +323,27 @@ def dem_setup(scene: Scene) -> DEMSetup:
         particles=mechanical_particles(0.5 * d, density, group=group), params=params, k_n=k_n,
         t_crit=t_crit, dt=cfg.dt if cfg.dt is not None else cfg.safety_factor * t_crit,
         dtype=jnp.float32 if cfg.precision == "float32" else jnp.float64, gravity=gravity,
-        density=density)
+        density=density, conduction_gap=conduction_gaps(scene))
+
+
+def conduction_gaps(scene: Scene) -> tuple[float, float]:
+    """``(particle-particle, particle-wall)`` conduction gap tolerances of a scene, fractions of
+    the (smaller) particle diameter: the contacts that conduct heat, the same for every motion
+    model (``[heat.contact]`` / ``[heat.wall]`` ``gap_tolerance``; a table the scene leaves out
+    has its default). The deprecated ``packing.contact_tolerance`` replaces both when given."""
+    from drumheat.scene.tables import ContactConfig, WallConfig
+
+    if scene.packing.contact_tolerance is not None:
+        import warnings
+
+        warnings.warn("packing.contact_tolerance is deprecated: use heat.contact.gap_tolerance "
+                      "and heat.wall.gap_tolerance (the conduction gap of every motion model)",
+                      DeprecationWarning, stacklevel=2)
+        tol = float(scene.packing.contact_tolerance)
+        return tol, tol
+    pp = (scene.heat.contact or ContactConfig).gap_tolerance
+    pw = (scene.heat.wall or WallConfig).gap_tolerance
+    return float(pp), float(pw)
 
 
 def fit_time_step(dt: float, interval: float) -> tuple[float, int]:

@@ -72,7 +72,10 @@ def _cmd_export_vtk(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from drumheat._version import __version__
+
     p = argparse.ArgumentParser(prog="drumheat", description="Thermal DEM of particle beds.")
+    p.add_argument("--version", action="version", version=f"drumheat {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     s = sub.add_parser("scenes", help="list the built-in scenes")
     s.set_defaults(func=_cmd_scenes)

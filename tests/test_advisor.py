@@ -74,3 +74,18 @@ def test_moving_bed_heat_comes_from_the_tubes_not_the_gas():
 def test_every_dem_scene_can_be_explained(name):
     adv = explain(name)
     assert adv.terms[0].name == "contact conduction" and adv.terms[0].conductance > 0
+
+
+@pytest.mark.parametrize("model, can", [("static", True), ("dem", False)])
+def test_internal_conduction_is_recommended_only_where_the_motion_model_has_it(model, can):
+    from drumheat.scene import load_scene
+
+    # alpha_wp = 1e4 W/(m2 K) on 8 mm glass: Bi = (alpha/4) r / lambda >> 0.1
+    scene = load_scene("weigler-glass-drum-9.55", {"heat.wall.alpha": 1.0e4,
+                                                   "motion.model": model})
+    adv = explain(scene)
+    assert adv.biot > 0.1
+    if can:
+        assert "add [heat.internal]" in adv.biot_verdict
+    else:  # the DEM refuses [heat.internal]: the advice says so instead of recommending it
+        assert "cannot resolve" in adv.biot_verdict and "add [heat.internal]" not in adv.biot_verdict

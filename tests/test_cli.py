@@ -70,3 +70,12 @@ def test_console_script_exit_code():
                            "--set", "groups.0.diameter=0"], capture_output=True, text=True)
     assert proc.returncode == 2
     assert "groups.0.diameter" in proc.stderr
+
+
+def test_version(capsys):
+    import drumheat
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out.strip() == f"drumheat {drumheat.__version__}"

@@ -54,9 +54,11 @@ def test_replay_reproduces_the_recorded_run_to_round_off(tmp_path):
     np.testing.assert_allclose(replay.timeseries["Q_loss"], res.timeseries["Q_loss"], rtol=1e-10)
 
 
-def test_resting_dem_bed_matches_the_static_model():
+@pytest.mark.parametrize("gap", [0.0, 0.01])
+def test_resting_dem_bed_matches_the_static_model(gap):
     # The coupled update sees the same contacts and heat flows as the static model on the same
-    # positions (contacts where the surfaces overlap: tolerance 0), to round-off.
+    # positions (contacts where the surfaces overlap or the gap is within the conduction gap
+    # tolerance, 0 or the default 1 % of d), to round-off.
     # (A whole-run comparison is not a good test here: a monolayer resting in a drum keeps
     # creeping for seconds - its contact count drifts from 34 to 37 - so the static snapshot
     # and the DEM bed genuinely differ after a while.)
@@ -65,7 +67,7 @@ def test_resting_dem_bed_matches_the_static_model():
     from drumheat.motion.coupling import initial_extra, thermal_network
     from drumheat.thermal.network import ContactNetwork, find_contacts_2d_drum
 
-    scene = dem_scene(**{"drum.rpm": 0.0})
+    scene = dem_scene(**{"drum.rpm": 0.0, "heat.contact.gap_tolerance": gap})
     bed = make_motion(scene)
     model, T0 = bed.model()
     T = T0 + jnp.linspace(0.0, 3.0, 30)  # every contact carries heat
@@ -75,10 +77,14 @@ def test_resting_dem_bed_matches_the_static_model():
     state = dem.run(state, 2000)
     c = dem.contacts(state)
     h = bed.dt
-    net_dem = thermal_network(state.nbrs.idx, 30, c.pair_mask * h, c.wall_mask * h,
+    net_dem = thermal_network(state.nbrs.idx, 30, c.pair_conducts * h, c.wall_conducts * h,
                               jnp.asarray(bed.wall_heated), 1, h)
-    pairs, wall = find_contacts_2d_drum(np.asarray(state.position), bed.diameter, 0.05, 0.0)
-    assert len(pairs) == int(np.sum(c.pair_mask)) > 20
+    pairs, wall = find_contacts_2d_drum(np.asarray(state.position), bed.diameter, 0.05, gap,
+                                        wall_tolerance=bed.setup.conduction_gap[1])
+    assert len(pairs) == int(np.sum(c.pair_conducts)) > 20
+    assert len(wall) == int(np.sum(c.wall_conducts))
+    if gap == 0:
+        assert np.array_equal(c.pair_conducts, c.pair_mask)
     T = state.extra["T"]
     q_dem, _ = model.heat_flows(T, net_dem)
     q_static, _ = model.heat_flows(T, ContactNetwork.from_arrays(pairs, wall))
@@ -86,7 +92,7 @@ def test_resting_dem_bed_matches_the_static_model():
     # and a coupled step applies exactly that flow on the contacts at its end positions (to the
     # round-off of T ~ 300 K)
     new, c_new = dem.step(state)
-    net_new = thermal_network(new.nbrs.idx, 30, c_new.pair_mask * h, c_new.wall_mask * h,
+    net_new = thermal_network(new.nbrs.idx, 30, c_new.pair_conducts * h, c_new.wall_conducts * h,
                               jnp.asarray(bed.wall_heated), 1, h)
     q_new, _ = model.heat_flows(T, net_new)
     np.testing.assert_allclose(new.extra["T"], T + h * q_new / model.particles.capacity,

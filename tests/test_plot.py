@@ -140,7 +140,7 @@ def test_contact_network(static):
     ax = fig.axes[0]
     (lines,) = [c for c in ax.collections if isinstance(c, LineCollection)]
     pairs, _ = find_contacts_2d_drum(static.trajectory.position[1], static.trajectory.diameter,
-                                     0.05, static.scene.packing.contact_tolerance)
+                                     0.05, static.scene.heat.contact.gap_tolerance)
     assert len(lines.get_segments()) == len(pairs) > 50
     T = static.trajectory.T[1]
     i, j = pairs.T

@@ -169,6 +169,9 @@ class Contacts(NamedTuple):
     Particle-wall (length N*W, row-major over (particle, wall primitive)): ``wall_particle``,
     ``wall_index`` (primitive index into the wall tuple), ``wall_id`` (the walls' labels),
     ``wall_mask``, ``wall_overlap`` (m), ``wall_normal_force`` (N).
+    ``pair_conducts`` / ``wall_conducts``: the contacts that conduct heat, those that overlap or
+    whose surface gap is within the conduction gap tolerance (``make_dem(conduction_gap=...)``;
+    without one they equal the masks).
     Always multiply by the masks: padded entries hold index N (pairs) and zeros.
     """
 
@@ -184,6 +187,8 @@ class Contacts(NamedTuple):
     wall_mask: jax.Array
     wall_overlap: jax.Array
     wall_normal_force: jax.Array
+    pair_conducts: jax.Array
+    wall_conducts: jax.Array
 
 
 # XLA:CPU options for the DEM kernels. Its YNNPACK library fusions (on by default in jaxlib
@@ -516,6 +521,7 @@ def make_dem(
     batch_axis: Optional[str] = None,
     pair_kernel: str = "jax",
     conduction: Optional[PairConduction] = None,
+    conduction_gap: tuple[float, float] = (0.0, 0.0),
 ) -> DEM:
     """Compose a DEM system (static choices are fixed here, before ``jit``).
 
@@ -563,7 +569,17 @@ def make_dem(
         through the touching pairs every step (:mod:`drumheat.mechanics.conduction`); the
         state's ``extra`` is then the particle temperatures (N,), float64, advanced after the
         forces of every step and before ``extra_update``.
+      conduction_gap: ``(particle-particle, particle-wall)`` gap tolerances of the contacts that
+        conduct heat (``Contacts.pair_conducts`` / ``wall_conducts``, what a coupled thermal
+        update counts): a pair conducts while its surface gap is at most the first times the
+        smaller diameter, a particle-wall contact while the gap is at most the second times the
+        particle diameter; (0, 0): while they overlap (Weigler digest [2.4]). The neighbour
+        cutoff grows by the pair gap so that such pairs are listed.
     """
+    gap_pp, gap_pw = (float(g) for g in conduction_gap)
+    if not (0.0 <= gap_pp < 0.5 and 0.0 <= gap_pw < 0.5):
+        raise ValueError(f"conduction_gap must be two fractions of the diameter in [0, 0.5), "
+                         f"got {conduction_gap}")
     if dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3, got {dim}")
     if pair_kernel not in ("jax", "cpu"):
@@ -625,8 +641,9 @@ def make_dem(
     r_min = float(np.min(radius_np))
     skin = 0.5 * r_max if skin is None else float(skin)
     cutoff = 2.0 * r_max + skin
-    if conduction is not None:  # pairs that conduct across a gap must be in the neighbour list
-        cutoff += conduction.gap_tolerance * 2.0 * r_max
+    # pairs that conduct across a gap must be in the neighbour list
+    gap_cut = max(gap_pp, conduction.gap_tolerance if conduction is not None else 0.0)
+    cutoff += gap_cut * 2.0 * r_max
     if bounds is None:
         lo, hi = wall_bounds(walls, dim)
     else:
@@ -720,21 +737,31 @@ def make_dem(
             active = ovl > 0
             max_ovl = mx[0]
             w_part, w_idx, w_id, w_mask, w_ovl, w_fn = wall_slots(w_ovl > 0, w_ovl, w_fn)
+            p_cond = active
+            if gap_pp > 0:  # the kernel leaves dist zero where nothing touches
+                p_cond = pair_gap_mask(pos, i, j)
+            w_cond = wall_gap_mask(wd, w_mask)
         else:
             force, torque, new_spring, ovl, dist, fn, active, max_ovl = pair_part(
                 pos, vel, w, nbrs, pair_spring, vel_h, w_h, split_h, force, torque, i, j)
             pair_dist = dist  # every pair's, for the conduction gap tolerance (heat_flow)
+            p_cond = active
+            if gap_pp > 0:
+                r_i, r_j = radius[jnp.where(i < n, i, 0)], radius[jnp.where(j < n, j, 0)]
+                p_cond = (i < n) & (ovl >= -gap_pp * 2.0 * jnp.minimum(r_i, r_j))
             ovl = jnp.where(active, ovl, 0.0)
             dist = jnp.where(active, dist, 0.0)
             wall_out = wall_part(pos, vel, w, t, wall_spring, vel_h, w_h, split_h, force,
                                  torque, max_ovl)
             force, torque, new_wall_spring, max_ovl, w_part, w_idx, w_id, w_mask, w_ovl, w_fn = \
-                wall_out
+                wall_out[:10]
+            w_cond = wall_gap_mask(wall_out[10], w_mask)
         contacts = Contacts(
             pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
             pair_normal_force=fn,
             wall_particle=w_part, wall_index=w_idx, wall_id=w_id, wall_mask=w_mask,
-            wall_overlap=w_ovl, wall_normal_force=w_fn)
+            wall_overlap=w_ovl, wall_normal_force=w_fn, pair_conducts=p_cond,
+            wall_conducts=w_cond)
         if conduction is None or temperature is None:
             heat = None
         elif not in_kernel:
@@ -838,7 +865,8 @@ def make_dem(
         else:
             new_wall_spring = wall_spring
             slots = wall_slots(None, None, None)
-        return (force, torque, new_wall_spring, max_ovl) + slots
+            wd = jnp.zeros((n, 0), dtype)
+        return (force, torque, new_wall_spring, max_ovl) + slots + (wd,)
 
     def wall_geometry(pos, t):
         """Distance (N, W), unit normal towards the particle and wall velocity (N, W, dim)."""
@@ -847,6 +875,22 @@ def make_dem(
                     jnp.zeros((n, 0, dim), dtype))
         evs = [wl.evaluate(pos, t) for wl in walls]
         return tuple(jnp.stack([e[k] for e in evs], axis=1).astype(dtype) for k in range(3))
+
+    def pair_gap_mask(pos, i, j):
+        """Neighbour pairs within the conduction gap (``conduction_gap``), from the positions."""
+        valid = i < n
+        ii, jj = jnp.where(valid, i, 0), jnp.where(valid, j, 0)
+        d = displacement(pos[jj], pos[ii])
+        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        ri, rj = radius[ii], radius[jj]
+        return valid & (ri + rj - dist >= -gap_pp * 2.0 * jnp.minimum(ri, rj))
+
+    def wall_gap_mask(wd, w_mask):
+        """Particle-wall slots within the conduction gap, flattened like ``wall_mask``."""
+        if n_w == 0 or gap_pw == 0:
+            return w_mask
+        r_ = radius[:, None]
+        return ((r_ - wd) >= -gap_pw * 2.0 * r_).reshape(-1)
 
     def wall_slots(wact, wovl, wfn):
         """The wall fields of :class:`Contacts`, flattened over the (N, W) slots."""

@@ -105,8 +105,10 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
                     wall_time=jnp.zeros_like(extra["wall_time"]), **out)
 
     def update(extra, state, contacts, dt_):
-        pm = contacts.pair_mask.astype(jnp.float64) * dt
-        wm = contacts.wall_mask.astype(jnp.float64) * dt
+        # the contacts that conduct: overlapping or within the conduction gap tolerance
+        # ([heat.contact] / [heat.wall] gap_tolerance, drumheat.mechanics.make_dem)
+        pm = contacts.pair_conducts.astype(jnp.float64) * dt
+        wm = contacts.wall_conducts.astype(jnp.float64) * dt
         pair = {"time": extra["pair_data"]["time"] + pm,
                 "rec_time": extra["pair_data"]["rec_time"] + pm}
         count = {"pair": extra["count"]["pair"] + jnp.sum(pm),

@@ -203,7 +203,7 @@ class DEMBed(DEMMotion):
                         gravity=self.gravity, periodic_length=self.periodic,
                         skin=self.scene.dem.skin, dtype=self.dtype, extra_update=update,
                         chunk=self.steps_per_record or self.steps_per_output,
-                        batch_axis=batch_axis)
+                        batch_axis=batch_axis, conduction_gap=self.setup.conduction_gap)
 
     def packing_positions(self) -> np.ndarray:
         """Initial positions (pouring, deposition or a file), settled with the drum at rest
@@ -349,11 +349,14 @@ class DEMBed(DEMMotion):
             files={"contacts.npz": rec.save} if rec is not None else {})
 
     def _interfraction(self, positions) -> np.ndarray:
-        """Contacts between the two groups at each output time (mixing observable)."""
+        """Contacts between the two groups at each output time (mixing observable), with the
+        definition of the contacts that conduct (overlap or a gap within
+        ``heat.contact.gap_tolerance``, :func:`drumheat.assemble.conduction_gaps`)."""
         from scipy.spatial import cKDTree
 
         counts = []
         d = self.diameter
+        gap = self.setup.conduction_gap[0]
         for p in positions:
             box = None
             if self.periodic is not None:
@@ -362,7 +365,8 @@ class DEMBed(DEMMotion):
                 box = np.array([np.inf] * (self.dim - 1) + [self.periodic])
                 box[:-1] = 1e9
             tree = cKDTree(p, boxsize=box)
-            pairs = np.array(sorted(tree.query_pairs(d.max() * 1.001)), int).reshape(-1, 2)
+            pairs = np.array(sorted(tree.query_pairs(d.max() * (1.001 + gap))),
+                             int).reshape(-1, 2)
             if len(pairs):
                 dist = np.linalg.norm(p[pairs[:, 0]] - p[pairs[:, 1]], axis=1)
                 if self.periodic is not None:
@@ -370,7 +374,9 @@ class DEMBed(DEMMotion):
                     dz = np.minimum(dz, self.periodic - dz)
                     dist = np.sqrt(np.sum((p[pairs[:, 0], :-1] - p[pairs[:, 1], :-1]) ** 2, 1)
                                    + dz**2)
-                pairs = pairs[dist < 0.5 * (d[pairs[:, 0]] + d[pairs[:, 1]])]
+                di, dj = d[pairs[:, 0]], d[pairs[:, 1]]
+                pairs = pairs[(dist < 0.5 * (di + dj)) | (dist - 0.5 * (di + dj)
+                                                          <= gap * np.minimum(di, dj))]
             c = count_interfraction_contacts(pairs[:, 0], pairs[:, 1], np.ones(len(pairs), bool),
                                              self.group)
             counts.append(float(np.asarray(c)))

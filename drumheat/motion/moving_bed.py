@@ -295,7 +295,7 @@ class MovingBed(DEMMotion):
                         gravity=self.gravity, periodic_length=self.hopper.depth,
                         bounds=self.bounds, skin=self.scene.dem.skin, dtype=self.dtype,
                         extra_update=update, boundary_update=self.make_boundary(),
-                        chunk=self.steps_per_output)
+                        chunk=self.steps_per_output, conduction_gap=self.setup.conduction_gap)
 
     # -- the loop -------------------------------------------------------------------------------
     def initial_state(self, params=None):

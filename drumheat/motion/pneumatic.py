@@ -484,7 +484,8 @@ class PneumaticChannel(DEMMotion):
                         gravity=self.gravity, periodic_length=self.D, bounds=self.bounds,
                         skin=self.skin, dtype=self.dtype, extra_update=upd,
                         external_force=ext, boundary_update=bnd, chunk=self.steps_per_output,
-                        safety_factor=cfg.safety_factor)
+                        safety_factor=cfg.safety_factor,
+                        conduction_gap=self.setup.conduction_gap)
 
     def _zero_acc(self):
         z = lambda k: jnp.zeros(k, jnp.float64)  # noqa: E731

@@ -153,9 +153,9 @@ class StaticBed(ThermalBed):
     def __init__(self, scene: Scene):
         super().__init__(scene)
         self.packing = assemble.initial_packing(scene)
+        gap_pp, gap_pw = assemble.conduction_gaps(scene)
         pairs, wall = find_contacts_2d_drum(self.packing.position, self.packing.diameter,
-                                            scene.drum.diameter,
-                                            scene.packing.contact_tolerance)
+                                            scene.drum.diameter, gap_pp, wall_tolerance=gap_pw)
         self.pairs, self.wall_particles = pairs, wall
         self.net = ContactNetwork.from_arrays(pairs, wall)
         model, T0 = self.model()

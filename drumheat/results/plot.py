@@ -30,6 +30,7 @@ matplotlib.use("Agg") if matplotlib.get_backend().lower() == "agg" else None
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from drumheat.assemble import conduction_gaps  # noqa: E402
 from drumheat.results import observe  # noqa: E402
 
 #: 0 degC in K.
@@ -743,7 +744,7 @@ def plot_contact_network(result, index=-1, pairs=None, color_by="heat_flow", ax=
     through it (``color_by="heat_flow"``, W; weigler eq. [2.7]) or of the temperature
     difference across it (``color_by="dT"``, K). Contacts come from
     :func:`drumheat.thermal.network.find_contacts_2d_drum` at the chosen output (with the
-    scene's ``packing.contact_tolerance``) unless ``pairs`` are given.
+    scene's ``heat.contact.gap_tolerance``) unless ``pairs`` are given.
 
     Parameters
     ----------
@@ -779,7 +780,7 @@ def plot_contact_network(result, index=-1, pairs=None, color_by="heat_flow", ax=
 
         if fr.drum_diameter is None:
             raise ValueError("no scene to find contacts in; pass pairs=")
-        tol = tolerance if tolerance is not None else fr.scene.packing.contact_tolerance
+        tol = tolerance if tolerance is not None else conduction_gaps(fr.scene)[0]
         pairs, _ = find_contacts_2d_drum(pos, fr.diameter, fr.drum_diameter, tol)
     pairs = np.asarray(pairs, int).reshape(-1, 2)
     fig, ax = _fig_ax(ax, (6.2, 6.2))

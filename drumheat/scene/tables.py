@@ -186,6 +186,20 @@ class ContactConfig(Table):
     alpha: Optional[float] = spec(None, unit="W/(m2 K)", gt=0,
                                   doc="alpha_pp on the projected area pi d^2/4; required for "
                                       "model 'constant'.")
+    gap_tolerance: float = spec(0.01, ge=0, lt=0.5,
+                                doc="A contact conducts while the surfaces overlap or the gap between them is at most "
+                                        "this fraction of the smaller diameter "
+                                        "(weigler eq. [2.4] with a tolerance): the gas "
+                                        "gap next to a contact conducts about as well "
+                                        "as the contact itself (Schluender's model, "
+                                        "weigler section 3), and soft DEM contacts "
+                                        "chatter open and shut by far less than 1 % of "
+                                        "d. The same definition in every motion model "
+                                        "(static beds, DEM, recording and replay, "
+                                        "contact counts); the conductance alpha A_p "
+                                        "does not depend on the overlap, so softened "
+                                        "stiffness does not change it. 0: while they "
+                                        "overlap only.")
 
 
 @dataclass(frozen=True)
@@ -200,6 +214,20 @@ class WallConfig(Table):
     alpha: Optional[float] = spec(None, unit="W/(m2 K)", gt=0,
                                   doc="alpha_wp on the projected area pi d^2/4; required for "
                                       "model 'constant'.")
+    gap_tolerance: float = spec(0.01, ge=0, lt=0.5,
+                                doc="A contact conducts while the surfaces overlap or the gap between them is at most "
+                                        "this fraction of the particle's diameter "
+                                        "(weigler eq. [2.4] with a tolerance): the gas "
+                                        "gap next to a contact conducts about as well "
+                                        "as the contact itself (Schluender's model, "
+                                        "weigler section 3), and soft DEM contacts "
+                                        "chatter open and shut by far less than 1 % of "
+                                        "d. The same definition in every motion model "
+                                        "(static beds, DEM, recording and replay, "
+                                        "contact counts); the conductance alpha A_p "
+                                        "does not depend on the overlap, so softened "
+                                        "stiffness does not change it. 0: while they "
+                                        "overlap only.")
 
 
 @dataclass(frozen=True)
@@ -452,10 +480,14 @@ class DEMConfig(Table):
     stiffness: Optional[float] = spec(None, unit="N/m", gt=0,
                                       doc="Normal (= tangential) stiffness k_n of particle "
                                           "contacts; default E A_p / d_p (weigler eq. [2.3]). "
-                                          "A softer value allows a larger time step; the "
-                                          "contact conduction of drumheat does not depend on "
-                                          "the overlap, so softening changes the heat transfer "
-                                          "only through the motion.")
+                                          "A softer value allows a larger time step. The "
+                                          "contacts that conduct include those within the "
+                                          "conduction gap (heat.contact.gap_tolerance, "
+                                          "heat.wall.gap_tolerance) and their conductance does "
+                                          "not depend on the overlap, so softening changes the "
+                                          "heat transfer only through the motion; with a gap "
+                                          "tolerance 0 a softer contact also touches longer "
+                                          "(docs/models/coupled-dem.md).")
     wall_stiffness: Optional[float] = spec(None, unit="N/m", gt=0,
                                            doc="Stiffness of particle-wall contacts; default: "
                                                "the particle stiffness.")
@@ -623,9 +655,11 @@ class PackingConfig(Table):
     arrangement: str = spec("layers", choices=("layers", "mixed"),
                             doc="'layers': groups poured one after the other (first group at "
                                 "the bottom); 'mixed': pouring order shuffled.")
-    contact_tolerance: float = spec(0.01, ge=0, lt=0.5,
-                                    doc="Two surfaces closer than this fraction of the smaller "
-                                        "diameter count as touching.")
+    contact_tolerance: Optional[float] = spec(
+        None, ge=0, lt=0.5,
+        doc="Deprecated: the conduction gap is heat.contact.gap_tolerance and "
+            "heat.wall.gap_tolerance, the same for every motion model. When given, it replaces "
+            "both (with a warning).")
     file: Optional[str] = spec(None, doc="Packing .npz (arrays position, diameter, group) for "
                                          "method 'file'; relative to the scene file.")
     surface_angle: Optional[float] = spec(None, unit="deg", gt=-90, lt=90,

@@ -69,13 +69,15 @@ class ContactNetwork(eqx.Module):
                    jnp.ones(len(pairs)), jnp.asarray(wp), jnp.asarray(wid), jnp.ones(len(wp)))
 
 
-def find_contacts_2d_drum(position, diameter, drum_diameter, tolerance=0.01):
+def find_contacts_2d_drum(position, diameter, drum_diameter, tolerance=0.01,
+                          wall_tolerance=None):
     """Contacts of a resting packing in a drum, from geometry.
 
     Two particles touch when the gap between their surfaces is at most ``tolerance`` times the
     smaller diameter (weigler-thermal-dem.md eq. [2.4] with a gap tolerance, as needed for
     packings from measured coordinates); a particle touches the drum shell when its gap to the
-    shell is at most ``tolerance`` times its diameter. Uses a k-d tree (no N x N array).
+    shell is at most ``wall_tolerance`` (default ``tolerance``) times its diameter. Uses a
+    k-d tree (no N x N array).
 
     Parameters
     ----------
@@ -84,7 +86,9 @@ def find_contacts_2d_drum(position, diameter, drum_diameter, tolerance=0.01):
     diameter : array_like, shape (N,)
     drum_diameter : float
     tolerance : float
-        Gap tolerance as a fraction of the (smaller) diameter.
+        Particle-particle gap tolerance as a fraction of the smaller diameter.
+    wall_tolerance : float, optional
+        Particle-shell gap tolerance as a fraction of the particle diameter.
 
     Returns
     -------
@@ -104,5 +108,6 @@ def find_contacts_2d_drum(position, diameter, drum_diameter, tolerance=0.01):
     pairs = pairs.reshape(-1, 2)
     r_xy = np.hypot(position[:, 0], position[:, 1])
     wall_gap = 0.5 * drum_diameter - r_xy - 0.5 * diameter
-    wall_particles = np.nonzero(wall_gap <= tolerance * diameter)[0]
+    wall_tol = tolerance if wall_tolerance is None else wall_tolerance
+    wall_particles = np.nonzero(wall_gap <= wall_tol * diameter)[0]
     return pairs, wall_particles
