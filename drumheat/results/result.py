@@ -38,7 +38,10 @@ class Result:
         Columns ``t`` (s), ``T_mean`` (K, mass-weighted), ``T_mean:<group>``, ``T_min``,
         ``T_max`` and, as the scene calls for, ``Q_wall`` (J received from walls since t = 0;
         a drum with internals adds ``Q_wall:shell``, ``Q_wall:inner``, ``Q_wall:plates``),
-        ``Q_loss`` (J lost to the gas since t = 0) and ``alpha_overall`` (W/(m2 K), eq. [1.10]).
+        ``Q_loss`` (J lost to the gas since t = 0) and, for a drum with a wall temperature, eq.
+        [1.10] on three conventions: ``alphaA_overall`` (W/K, no area), ``alpha_overall``
+        (W/(m2 K), A = d^2 x the running mean of the wall contacts) and, with
+        ``heat.wall.reference_contacts``, ``alpha_overall_A9`` (A = that number x d^2).
     summary : dict
         What ``summary.json`` holds.
     """
@@ -97,9 +100,15 @@ def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
         cols["Q_wall"] = sum(traj.Q[a] for a in surfaces)
     if "wall" in traj.Q and scene.drum is not None and scene.drum.wall_temperature is not None:
         T_cap = traj.T @ traj.capacity / traj.capacity.sum()
-        cols["alpha_overall"] = np.asarray(observe.alpha_overall(
-            traj.t, T_cap, scene.drum.wall_temperature, T_cap[0], traj.capacity.sum(),
-            traj.wall_area))
+        # eq. [1.10] times A: the bed's conductance, free of any area convention
+        alpha_A = np.asarray(observe.alpha_overall(
+            traj.t, T_cap, scene.drum.wall_temperature, T_cap[0], traj.capacity.sum(), 1.0))
+        with np.errstate(divide="ignore", invalid="ignore"):  # no wall contact yet: inf, as before
+            cols["alpha_overall"] = alpha_A / traj.wall_area
+        cols["alphaA_overall"] = alpha_A
+        n_ref = scene.heat.wall.reference_contacts if scene.heat.wall is not None else None
+        if n_ref is not None:  # the thesis' App. A9 area, A = n d^2 with a fixed n
+            cols["alpha_overall_A9"] = alpha_A / (n_ref * float(np.mean(traj.diameter**2)))
     if "gas" in traj.Q:
         cols["Q_loss"] = -traj.Q["gas"]
     for account in sorted(set(traj.Q) - {"wall", "gas"}):

@@ -214,6 +214,13 @@ class WallConfig(Table):
     alpha: Optional[float] = spec(None, unit="W/(m2 K)", gt=0,
                                   doc="alpha_wp on the projected area pi d^2/4; required for "
                                       "model 'constant'.")
+    reference_contacts: Optional[float] = spec(
+        None, gt=0,
+        doc="Evaluation only: the number of wall contacts n of a fixed area A = n d^2 for the "
+            "column alpha_overall_A9 (eq. [1.10] on the thesis' App. A9 area; A9 uses 45 for "
+            "its 370-sphere drum, weigler digest sections 6.6 and 12.9). Without it only "
+            "drumheat's own alpha_overall (running mean of the wall contacts) and the "
+            "convention-free alphaA_overall (W/K) are written.")
     gap_tolerance: float = spec(0.01, ge=0, lt=0.5,
                                 doc="A contact conducts while the surfaces overlap or the gap between them is at most "
                                         "this fraction of the particle's diameter "
