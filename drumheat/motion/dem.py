@@ -203,7 +203,8 @@ class DEMBed(DEMMotion):
                         gravity=self.gravity, periodic_length=self.periodic,
                         skin=self.scene.dem.skin, dtype=self.dtype, extra_update=update,
                         chunk=self.steps_per_record or self.steps_per_output,
-                        batch_axis=batch_axis, conduction_gap=self.setup.conduction_gap)
+                        batch_axis=batch_axis, conduction_gap=self.setup.conduction_gap,
+                        pair_kernel=self.contact_backend(batch_axis is not None).backend)
 
     def packing_positions(self) -> np.ndarray:
         """Initial positions (pouring, deposition or a file), settled with the drum at rest
@@ -346,7 +347,8 @@ class DEMBed(DEMMotion):
             mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),
             group=self.group,
             n_contacts=n_pairs, n_wall_contacts=n_wall, wall_area=d2 * cum_wall, extra=extra,
-            files={"contacts.npz": rec.save} if rec is not None else {})
+            files={"contacts.npz": rec.save} if rec is not None else {},
+            info=self.backend_info())
 
     def _interfraction(self, positions) -> np.ndarray:
         """Contacts between the two groups at each output time (mixing observable), with the

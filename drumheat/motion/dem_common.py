@@ -14,6 +14,7 @@ import time
 import jax
 
 from drumheat.mechanics import DEMError, DEMState
+from drumheat.mechanics.backend import BackendChoice, choose_contact_backend
 from drumheat.motion.base import AbstractMotion
 from drumheat.motion.coupling import thermal_step_limit
 from drumheat.scene import SceneError
@@ -34,6 +35,30 @@ class DEMMotion(AbstractMotion):
     """
 
     dem = None
+    _backend = None
+
+    def contact_backend(self, batched: bool = False) -> BackendChoice:
+        """The contact kernel of this scene's DEM (``[dem] contact_backend``,
+        :func:`drumheat.mechanics.backend.choose_contact_backend`); chosen once for single
+        runs (one warning line at most), always JAX under ``vmap``."""
+        if batched:
+            return choose_contact_backend(self.scene.dem.contact_backend, dim=self.scene.dim,
+                                          params=self.params, dtype=self.dtype, batched=True,
+                                          warn=False)
+        if self._backend is None:
+            self._backend = choose_contact_backend(self.scene.dem.contact_backend,
+                                                   dim=self.scene.dim, params=self.params,
+                                                   dtype=self.dtype)
+        return self._backend
+
+    def backend_info(self) -> dict:
+        """What summary.json says about the contact kernel of the run."""
+        choice = self.contact_backend()
+        info = {"contact_backend": choice.backend}
+        if choice.reason is not None:
+            info["contact_backend_note"] = (f"'{choice.requested}' asked for; "
+                                            f"{choice.reason}")
+        return info
 
     def check(self, start, end, attempt=0):
         """The DEM's host-side check of a chunk (:meth:`drumheat.mechanics.DEM.check_chunk`):

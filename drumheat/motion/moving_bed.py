@@ -295,7 +295,8 @@ class MovingBed(DEMMotion):
                         gravity=self.gravity, periodic_length=self.hopper.depth,
                         bounds=self.bounds, skin=self.scene.dem.skin, dtype=self.dtype,
                         extra_update=update, boundary_update=self.make_boundary(),
-                        chunk=self.steps_per_output, conduction_gap=self.setup.conduction_gap)
+                        chunk=self.steps_per_output, conduction_gap=self.setup.conduction_gap,
+                        pair_kernel=self.contact_backend().backend)
 
     # -- the loop -------------------------------------------------------------------------------
     def initial_state(self, params=None):
@@ -339,7 +340,7 @@ class MovingBed(DEMMotion):
             mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),
             group=self.group, n_contacts=np.concatenate([n_pairs[1:2], n_pairs[1:]]),
             n_wall_contacts=np.concatenate([n_wall[1:2], n_wall[1:]]),
-            wall_area=np.zeros(len(t)), extra=ts, records=records, info={"moving_bed": info})
+            wall_area=np.zeros(len(t)), extra=ts, records=records, info={"moving_bed": info, **self.backend_info()})
 
     def constants(self) -> dict:
         """What :func:`measure` needs besides the records (JSON-serialisable)."""

@@ -485,7 +485,8 @@ class PneumaticChannel(DEMMotion):
                         skin=self.skin, dtype=self.dtype, extra_update=upd,
                         external_force=ext, boundary_update=bnd, chunk=self.steps_per_output,
                         safety_factor=cfg.safety_factor,
-                        conduction_gap=self.setup.conduction_gap)
+                        conduction_gap=self.setup.conduction_gap,
+                        pair_kernel=self.contact_backend().backend)
 
     def _zero_acc(self):
         z = lambda k: jnp.zeros(k, jnp.float64)  # noqa: E731
@@ -664,7 +665,7 @@ class PneumaticChannel(DEMMotion):
             diameter=self.diameter, mass=self.mass, capacity=self.capacity, group=self.group,
             n_contacts=np.asarray(pairs), n_wall_contacts=np.asarray(walls),
             wall_area=np.zeros(n_out), extra={k: np.asarray(v, float) for k, v in cols.items()},
-            files=files, info=info, records=records)
+            files=files, info=dict(info, **self.backend_info()), records=records)
 
 
 def _write_json(path, ev):

@@ -519,6 +519,15 @@ class DEMConfig(Table):
             "weigler-glass-mixing-9.55: 26.8 +- 4.6 deg at 0.2, 29.8 +- 4.7 deg at 0.1).")
     skin: Optional[float] = spec(None, unit="m", gt=0,
                                  doc="Neighbour-list skin; default half the largest diameter.")
+    contact_backend: str = spec(
+        "auto", choices=("auto", "jax", "cpu"),
+        doc="Contact kernel: 'cpu' the C++ contact loop (compiled on first use with the "
+            "machine's C++ compiler and cached; single runs on the CPU), 'jax' the JAX kernel "
+            "(every platform, ensembles), 'auto' the C++ loop where it can serve and JAX "
+            "elsewhere. Same contact law, results equal to round-off (a flowing bed's "
+            "trajectory then diverges like any chaotic flow). 'cpu' where it cannot serve "
+            "falls back to JAX with one warning line; summary.json says which ran "
+            "(contact_backend).")
     precision: str = spec("float64", choices=("float32", "float64"),
                           doc="Floating-point type of the mechanics; temperatures are always "
                               "float64.")
