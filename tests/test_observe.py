@@ -357,3 +357,18 @@ def test_mechanical_mixing_time_recovers_tau():
     # a record too short for the plateau is flagged
     short = ob.mechanical_mixing_time(t[:25], counts[:25], plateau_fraction=0.99)
     assert not short.within_record
+
+
+def test_mixing_time_horizontal_finds_the_break_of_a_ramp_and_plateau():
+    from drumheat.results.observe import mixing_time_horizontal
+
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 180.0, 0.5)
+    c = 20.0 + 1.5 * np.minimum(t, 48.0) + rng.normal(0.0, 2.0, t.size)
+    fit = mixing_time_horizontal(t, c)
+    assert fit.time == pytest.approx(48.0, abs=2.0)
+    assert fit.plateau == pytest.approx(92.0, abs=1.0)
+    assert fit.slope == pytest.approx(1.5, rel=0.05)
+    assert fit.within_record and fit.residual == pytest.approx(2.0, rel=0.15)
+    # a record that never levels off: the break sits at its end
+    assert not mixing_time_horizontal(t, 20.0 + 1.5 * t).within_record

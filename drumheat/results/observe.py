@@ -58,6 +58,8 @@ __all__ = [
     "count_interfraction_contacts",
     "MixingTimeFit",
     "mechanical_mixing_time",
+    "mixing_time_horizontal",
+    "HorizontalTrend",
 ]
 
 
@@ -794,3 +796,70 @@ def mechanical_mixing_time(t, counts, plateau_fraction=0.95, p0=None):
         plateau_fraction=float(plateau_fraction), within_record=bool(t_mech <= t.max()),
     )
 
+
+
+class HorizontalTrend(NamedTuple):
+    """Result of :func:`mixing_time_horizontal`: a rising straight trend line that becomes
+    horizontal at ``time``.
+
+    Attributes
+    ----------
+    time : float
+        Where the trend line becomes horizontal (the break point), s.
+    plateau : float
+        The horizontal level (counts).
+    slope : float
+        Slope of the rising part, counts/s.
+    residual : float
+        Root-mean-square deviation of the counts from the trend line.
+    within_record : bool
+        False if the break lies at the last sample (no horizontal part seen; run longer).
+    """
+
+    time: float
+    plateau: float
+    slope: float
+    residual: float
+    within_record: bool
+
+    def trend(self, t):
+        """The trend line ``plateau - slope max(time - t, 0)`` (numpy)."""
+        t = np.asarray(t, dtype=float)
+        return self.plateau - self.slope * np.maximum(self.time - t, 0.0)
+
+
+def mixing_time_horizontal(t, counts) -> HorizontalTrend:
+    """Mechanical mixing time as the time at which a trend line through the inter-fraction
+    contact counts becomes horizontal, read literally (weigler-thermal-dem.md section 11.2).
+
+    The trend line is a straight rise followed by a horizontal line,
+    ``c(t) = plateau - slope max(t_b - t, 0)``, fitted by least squares: for every break
+    ``t_b`` on the sample times the two linear coefficients follow in closed form, and the
+    break with the smallest squared deviation is taken (no starting guess, no iteration).
+    Unlike the plateau fraction of :func:`mechanical_mixing_time`, the break needs no
+    threshold; it does need a record that reaches well into the plateau.
+
+    Parameters
+    ----------
+    t : array_like, shape (n,)
+        Times since the start of rotation, s.
+    counts : array_like, shape (n,)
+        Inter-fraction contact counts.
+    """
+    t = np.asarray(t, dtype=float)
+    c = np.asarray(counts, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(c)
+    t, c = t[ok], c[ok]
+    if t.size < 4:
+        raise ValueError(f"mixing_time_horizontal: need at least 4 samples, got {t.size}")
+    best = None
+    for tb in t[1:]:
+        x = -np.maximum(tb - t, 0.0)  # c = plateau + slope * x
+        A = np.stack([np.ones_like(t), x], axis=1)
+        coef, *_ = np.linalg.lstsq(A, c, rcond=None)
+        sse = float(np.sum((A @ coef - c) ** 2))
+        if best is None or sse < best[0]:
+            best = (sse, tb, coef)
+    sse, tb, (plateau, slope) = best
+    return HorizontalTrend(time=float(tb), plateau=float(plateau), slope=float(slope),
+                           residual=math.sqrt(sse / t.size), within_record=bool(tb < t[-1]))
