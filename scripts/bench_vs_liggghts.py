@@ -35,8 +35,15 @@ outside both codes; compare rows with little). drumheat runs on whatever JAX dev
 default (CPU here: it uses both cores through XLA's intra-op threads, so its fair LIGGGHTS
 partner is the 2-rank run).
 
+By default drumheat is timed through the product path, the built-in scene ``glass-drum-3d``
+(the same drum with its own poured packing; k = 1e5 N/m for particles and wall, dt = 0.1
+t_crit = 1.6e-5 s, the coupled heat of the scene: contact times every step, a thermal step every
+10) with ``dem.contact_backend`` = jax and cpu; ``--bespoke`` times the DEM built here from
+the LIGGGHTS packing as before. The step cost per particle is what is compared; the step sizes
+differ (LIGGGHTS 1e-5 s).
+
 Usage: python scripts/bench_vs_liggghts.py [--n 2000 10000 50000] [--steps S] [--quick]
-       [--ranks 1 2] [--workdir DIR] [--no-liggghts] [--thermal on|off]
+       [--ranks 1 2] [--workdir DIR] [--no-liggghts] [--thermal on|off] [--bespoke]
 """
 
 from __future__ import annotations
@@ -208,6 +215,44 @@ def time_drumheat(dat, steps, warm, thermal, pair_kernel="jax"):
                 rebuilds=int(out.n_rebuilds) - r0, note=extra)
 
 
+def scene_for(n, backend="auto"):
+    """The built-in scene glass-drum-3d at N particles (its documented knob: depth = N x
+    2.6e-5 m), on the given contact backend."""
+    from drumheat.scene import load_scene
+
+    return load_scene("glass-drum-3d", {"groups.0.count": n, "drum.depth": n * 2.6e-5,
+                                        "dem.contact_backend": backend})
+
+
+def time_scene(n, steps, warm, backend="auto"):
+    """drumheat through the product path: the scene's motion model (``make_motion``), its
+    poured initial state and its DEM with the coupled heat update (contact times every step, a
+    thermal step every ``dem.thermal_substeps``), timed over ``steps`` after ``warm``."""
+    from drumheat.motion import make_motion
+
+    t0 = time.perf_counter()
+    motion = make_motion(scene_for(n, backend))
+    state = motion.initial_state()  # pours the bed (not timed)
+    t_setup = time.perf_counter() - t0
+    dem = motion.dem
+    t0 = time.perf_counter()
+    state = dem.run(state, warm, chunk=warm)  # compiles
+    jax.block_until_ready(state.position)
+    t_warm = time.perf_counter() - t0
+    ld = load()
+    r0 = int(state.n_rebuilds)
+    c0 = cpu_ticks()
+    t0 = time.perf_counter()
+    out = dem.run(state, steps, chunk=steps)
+    jax.block_until_ready(out.position)
+    wall = time.perf_counter() - t0
+    steal = steal_percent(c0, cpu_ticks())
+    return dict(rate=n * steps / wall, wall=wall, load=ld, steal=steal, warm_s=t_warm,
+                rebuilds=int(out.n_rebuilds) - r0, backend=motion.contact_backend().backend,
+                note=f"scene path, backend {motion.contact_backend().backend}, set-up "
+                     f"{t_setup:.0f} s, warm-up {t_warm:.0f} s")
+
+
 def time_liggghts(rst, work, n, steps, warm, ranks, thermal):
     log = f"logs/bench_N{n}_np{ranks}_{thermal}.log"
     ld = load()
@@ -243,6 +288,9 @@ def main():
     ap.add_argument("--pair-kernel", nargs="+", default=["jax", "cpu"], choices=["jax", "cpu"],
                     help="drumheat pair kernels to time: the JAX kernel and/or the C++ loop "
                          "(make_dem(pair_kernel='cpu'), where it is available)")
+    ap.add_argument("--bespoke", action="store_true",
+                    help="time drumheat's DEM built here from the LIGGGHTS packing (the "
+                         "earlier path) instead of the built-in scene glass-drum-3d")
     args = ap.parse_args()
     sizes = [2000] if args.quick else args.n
     have_lig = shutil.which("liggghts") is not None and shutil.which("mpirun") is not None
@@ -265,14 +313,24 @@ def main():
             steps, warm = 3000, 500
         steps = args.steps or steps
         warm = args.warm or warm
+        if not args.bespoke:  # the product path: the built-in scene, each backend
+            for kernel in args.pair_kernel:
+                r = time_scene(n, steps, warm, kernel)
+                code = f"drumheat scene ({r['backend']})"
+                rows.append((n, code, "-", steps, r))
+                print(f"  N={n} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
+                      f"{r['load']:.2f}, steal {r['steal']:.0f} %, rebuilds {r['rebuilds']}) "
+                      f"{r['note']}", flush=True)
         if have_lig:
             rst, dat = prepare(n, work, args.prep_ranks)
+        elif not args.bespoke:
+            continue
         else:
             rst, dat = None, work / f"restart/drum_N{n}.data"
             if not dat.exists():
                 print(f"  no packing for N = {n} in {work}; skipped")
                 continue
-        for kernel in args.pair_kernel:
+        for kernel in (args.pair_kernel if args.bespoke else ()):
             if kernel == "cpu" and not cpu_kernel.available()[0]:
                 print(f"  C++ contact kernel unavailable: {cpu_kernel.available()[1]}")
                 continue
