@@ -118,3 +118,24 @@ def test_segmented_run_steps_equals_stepping_one_by_one():
     for f in ("position", "velocity", "angular_velocity", "force", "pair_spring",
               "wall_spring"):
         np.testing.assert_array_equal(np.asarray(getattr(a, f)), np.asarray(getattr(b, f)), f)
+
+
+def test_softening_area_correction_restores_the_real_contact():
+    """Two spheres pressed together by the same force F: the overlap law's conductance follows
+    the stiffness (overlap F / k) unless the area is corrected by k_sim / k_real (LIGGGHTS
+    area_correction, a = 1 for a linear contact); corrected, softening leaves it unchanged."""
+    from drumheat.mechanics.conduction import (PairConduction, pair_conductance,
+                                               softening_area_correction)
+
+    r, F, k_real, h = 0.004, 0.05, 1.22e9, 2.0
+    g = {}
+    for k in (1e5, 1e6, k_real):
+        pc = PairConduction("overlap", h, np.ones(2),
+                            area_correction=softening_area_correction(k, k_real)).checked(2)
+        g[k] = float(pair_conductance("overlap", pc.coefficient, r, r, 2 * r - F / k))
+    assert g[1e5] == pytest.approx(g[k_real], rel=1e-4)
+    assert g[1e6] == pytest.approx(g[k_real], rel=1e-4)
+    raw = float(pair_conductance("overlap", h, r, r, 2 * r - F / 1e5))
+    assert raw / g[k_real] == pytest.approx((k_real / 1e5) ** 0.5, rel=1e-3)  # uncorrected
+    with pytest.raises(ValueError, match="overlap"):
+        PairConduction("projected", h, np.ones(2), area_correction=0.5).checked(2)

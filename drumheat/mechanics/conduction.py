@@ -40,6 +40,7 @@ kernel computes them with :func:`heat_flow`.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import jax
@@ -48,7 +49,7 @@ import numpy as np
 
 from drumheat.models.contact_conductance import projected_area
 
-__all__ = ["LAWS", "PairConduction", "pair_conductance", "heat_flow"]
+__all__ = ["LAWS", "PairConduction", "pair_conductance", "heat_flow", "softening_area_correction"]
 
 LAWS = ("projected", "overlap")
 
@@ -62,12 +63,16 @@ class PairConduction(NamedTuple):
       heat_capacity: m c of every particle, J/K, shape (N,).
       gap_tolerance: a pair conducts while its surface gap is at most this fraction of the
         smaller diameter (module docstring); 0 = while it overlaps.
+      area_correction: law ``"overlap"`` only: factor on the overlap-circle area that undoes a
+        softened stiffness (:func:`softening_area_correction`); 1 = none. Applied as
+        ``sqrt(area_correction)`` on h, so both contact kernels carry it.
     """
 
     law: str
     coefficient: float
     heat_capacity: object
     gap_tolerance: float = 0.0
+    area_correction: float = 1.0
 
     def checked(self, n: int) -> "PairConduction":
         """Validated copy with a float64 heat-capacity array of length n."""
@@ -82,7 +87,37 @@ class PairConduction(NamedTuple):
         tol = float(self.gap_tolerance)
         if not (np.isfinite(tol) and tol >= 0):
             raise ValueError(f"conduction gap tolerance must be finite and >= 0, got {tol}")
-        return PairConduction(self.law, h, jnp.asarray(cap, jnp.float64), tol)
+        f = float(self.area_correction)
+        if not (np.isfinite(f) and f > 0):
+            raise ValueError(f"area correction must be finite and > 0, got {f}")
+        if f != 1.0 and self.law != "overlap":
+            raise ValueError("area_correction applies to the 'overlap' law only (the "
+                             "'projected' law does not depend on the overlap)")
+        # g = h sqrt(f A_c) = (h sqrt(f)) sqrt(A_c): carried by h into both kernels
+        return PairConduction(self.law, h * math.sqrt(f), jnp.asarray(cap, jnp.float64), tol)
+
+
+def softening_area_correction(k_simulated: float, k_real: float, exponent: float = 1.0) -> float:
+    """Factor on the overlap contact area of a softened contact: ``(k_sim / k_real)^a``.
+
+    A softer spring overlaps more under the same force, so an area computed from the overlap
+    is too large. LIGGGHTS' ``fix heat/gran/conduction`` with ``area_correction yes`` scales
+    the overlap area by ``(Y*/Y*_orig)^a`` with a = 1 for a Hooke (linear) contact and a = 2/3
+    for a Hertz contact (LIGGGHTS-PUBLIC doc/fix_heat_gran_conduction.html); for a linear
+    spring the overlap is F / k and the overlap circle's area ~ pi R* F / k, so with the
+    stiffnesses themselves ``(k_sim / k_real)^1`` restores the area of the real contact
+    under the same force. Use ``exponent = 2/3`` with Young's moduli of a Hertz contact.
+
+    Parameters
+    ----------
+    k_simulated, k_real : float
+        The softened (simulated) and the real stiffness (or Young's moduli, with exponent 2/3).
+    exponent : float
+        a of the scaling law.
+    """
+    if not (k_simulated > 0 and k_real > 0):
+        raise ValueError("stiffnesses must be positive")
+    return float((k_simulated / k_real) ** exponent)
 
 
 def pair_conductance(law: str, h, ri, rj, distance):
