@@ -31,6 +31,7 @@ def _cmd_run(args) -> int:
     scene = load_scene(args.scene, args.set)
     out = Path(args.out) if args.out is not None else default_out_dir(scene.name)
     result = run(scene, out=out, progress=not args.quiet, resume=args.resume,
+                 figure_formats=tuple(args.figure_formats or ("png",)), dpi=args.dpi,
                  allow_long=args.yes)
     s = result.summary
     print(f"{scene.name}: {s['n_particles']} particles, {s['duration_s']:g} s simulated in "
@@ -88,6 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--yes", action="store_true",
                    help="run even if the estimate made before the run is above an hour")
+    r.add_argument("--figure-format", action="append", choices=("png", "pdf", "svg"),
+                   dest="figure_formats", metavar="FORMAT",
+                   help="figure file format, png (default), pdf or svg; repeat for several")
+    r.add_argument("--dpi", type=int, default=120, help="resolution of PNG figures (default "
+                                                        "120; 300 for print)")
     r.add_argument("--resume", action="store_true",
                    help="continue the run whose checkpoint is in the result folder (the same "
                         "scene and overrides)")

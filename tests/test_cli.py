@@ -79,3 +79,13 @@ def test_version(capsys):
         main(["--version"])
     assert exit_.value.code == 0
     assert capsys.readouterr().out.strip() == f"drumheat {drumheat.__version__}"
+
+
+def test_figures_in_vector_formats(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main(["run", "weigler-static", "--out", str(out), "--quiet", "--set",
+                 "run.duration=60", "--figure-format", "pdf", "--figure-format", "svg",
+                 "--dpi", "200"]) == 0
+    for name in ("mean_temperatures", "snapshot_final"):
+        assert (out / f"{name}.pdf").is_file() and (out / f"{name}.svg").is_file()
+        assert not (out / f"{name}.png").exists()

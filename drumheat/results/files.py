@@ -234,8 +234,11 @@ def clean_stale_temporaries(out: Path) -> list[Path]:
     return removed
 
 
-def write_results(result, out_dir=None, figures: bool = True) -> Path:
+def write_results(result, out_dir=None, figures: bool = True, figure_formats=("png",),
+                  dpi: int = 120) -> Path:
     """Write a :class:`drumheat.runner.Result` to ``out_dir`` atomically; returns the folder.
+
+    ``figure_formats`` and ``dpi`` go to :func:`drumheat.results.plot.save_figures`.
 
     Raises
     ------
@@ -262,7 +265,7 @@ def write_results(result, out_dir=None, figures: bool = True) -> Path:
         if figures:
             from drumheat.results import plot
 
-            plot.save_figures(result, tmp)
+            plot.save_figures(result, tmp, formats=figure_formats, dpi=dpi)
         _write_manifest(tmp, [p.name for p in tmp.iterdir()])
         place_folder(tmp, out)
     except BaseException:
@@ -396,13 +399,14 @@ class RunFolder:
         return self.out / FRAMES
 
     # -- the end ------------------------------------------------------------------------------
-    def complete(self, result, figures: bool = True) -> Path:
-        """Replace the running folder by the complete result; delete the earlier one."""
+    def complete(self, result, figures: bool = True, **figure_options) -> Path:
+        """Replace the running folder by the complete result; delete the earlier one
+        (``figure_options``: ``figure_formats``, ``dpi`` of :func:`write_results`)."""
         self.checkpoint_path.unlink(missing_ok=True)
         (self.out / RUN_LOCK).unlink(missing_ok=True)
         self._register()
         try:
-            write_results(result, self.out, figures=figures)
+            write_results(result, self.out, figures=figures, **figure_options)
         except BaseException:
             self._release()
             raise

@@ -646,6 +646,10 @@ def plot_alpha_overall(result, ax=None, smooth=None):
 def plot_snapshot(result, index=-1, ax=None, vmin=None, vmax=None, walls=None, colorbar=True):
     """The drum cross-section with particles to scale, coloured by temperature (degC and K).
 
+    A 3D result shows the slice through the middle of the drum's depth: the particles whose
+    centres lie within half a diameter of the mid-plane (those the plane cuts), so that the
+    bed's inside is seen rather than a projection of all particles on top of each other.
+
     Parameters
     ----------
     result : Result, result folder or ParticleFrames
@@ -671,10 +675,19 @@ def plot_snapshot(result, index=-1, ax=None, vmin=None, vmax=None, walls=None, c
     vmax = float(np.max(T_C)) if vmax is None else vmax
     if vmax <= vmin:
         vmin, vmax = vmin - 0.5, vmax + 0.5
-    coll = draw_particles(ax, fr.position[index], fr.diameter, T_C[index], vmin=vmin, vmax=vmax)
+    pos, d, T_i = np.asarray(fr.position[index]), np.asarray(fr.diameter), T_C[index]
+    title = f"{fr.name}, {format_clock(float(fr.t[index]))}"
+    if pos.shape[1] == 3:  # the mid-depth slice
+        z = pos[:, 2]
+        depth = getattr(getattr(fr.scene, "drum", None), "depth", None)
+        z_mid = 0.5 * depth if depth else 0.5 * (z.min() + z.max())
+        cut = np.abs(z - z_mid) <= 0.5 * d
+        pos, d, T_i = pos[cut][:, :2], d[cut], T_i[cut]
+        title += f"\nslice at mid-depth: {int(np.sum(cut))} of {len(cut)} particles"
+    coll = draw_particles(ax, pos, d, T_i, vmin=vmin, vmax=vmax)
     draw_walls(ax, walls, t=float(fr.t[index]))
-    _setup_cross_section(ax, walls, fr.position, fr.diameter)
-    ax.set_title(f"{fr.name}, {format_clock(float(fr.t[index]))}")
+    _setup_cross_section(ax, walls, pos, d)
+    ax.set_title(title)
     if colorbar:
         temperature_colorbar(fig, coll, ax)
     return fig
@@ -855,18 +868,37 @@ def plot(result, kind: str = "mean_temperatures", **kwargs):
     return FIGURES[kind](result, **kwargs)
 
 
-def save_figures(result, folder) -> list[Path]:
-    """Write the standard figures of a run as PNG files into ``folder``."""
+#: file formats :func:`save_figures` writes (matplotlib's savefig formats)
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+
+def save_figures(result, folder, formats=("png",), dpi: int = 120) -> list[Path]:
+    """Write the standard figures of a run into ``folder``.
+
+    Parameters
+    ----------
+    result : Result
+    folder : path
+    formats : sequence of str
+        Any of :data:`FIGURE_FORMATS`; PDF and SVG are vector formats for papers.
+    dpi : int
+        Resolution of the PNG files (300 for print).
+    """
+    bad = [f for f in formats if f not in FIGURE_FORMATS]
+    if bad or not formats:
+        raise ValueError(f"figure formats must be among {FIGURE_FORMATS}, got {list(formats)}")
     folder = Path(folder)
     out = []
-    figs = {"mean_temperatures.png": plot_mean_temperatures(result),
-            "temperature_distributions.png": plot_distributions(result)}
+    figs = {"mean_temperatures": plot_mean_temperatures(result),
+            "temperature_distributions": plot_distributions(result)}
     if "alpha_overall" in result.timeseries:
-        figs["alpha_overall.png"] = plot_alpha_overall(result)
-    if result.scene.dim == 2:
-        figs["snapshot_final.png"] = plot_snapshot(result, -1)
+        figs["alpha_overall"] = plot_alpha_overall(result)
+    if result.scene.dim == 2 or (result.scene.drum is not None
+                                 and result.scene.motion.model in ("dem", "replay")):
+        figs["snapshot_final"] = plot_snapshot(result, -1)  # 3D: the mid-depth slice
     for name, fig in figs.items():
-        fig.savefig(folder / name, dpi=120)
+        for fmt in formats:
+            fig.savefig(folder / f"{name}.{fmt}", dpi=dpi)
+            out.append(folder / f"{name}.{fmt}")
         plt.close(fig)
-        out.append(folder / name)
     return out

@@ -59,9 +59,12 @@ class Result:
     def T(self) -> np.ndarray:
         return self.trajectory.T
 
-    def save(self, out_dir: str | Path | None = None, figures: bool = True) -> Path:
-        """Write the result files (see DESIGN.md) to ``out_dir`` (default results/<scene>)."""
-        return write_results(self, out_dir, figures=figures)
+    def save(self, out_dir: str | Path | None = None, figures: bool = True,
+             figure_formats=("png",), dpi: int = 120) -> Path:
+        """Write the result files (see DESIGN.md) to ``out_dir`` (default results/<scene>);
+        figures in ``figure_formats`` (png, pdf, svg) at ``dpi``."""
+        return write_results(self, out_dir, figures=figures, figure_formats=figure_formats,
+                             dpi=dpi)
 
 
 def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:

@@ -283,7 +283,8 @@ def trace(motion: AbstractMotion, params: dict | None = None) -> tuple:
 
 def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None = True,
         params: dict | None = None, overrides: dict | None = None, devices=None,
-        resume: bool = False, allow_long: bool = False) -> Result:
+        resume: bool = False, allow_long: bool = False, figure_formats=("png",),
+        dpi: int = 120) -> Result:
     """Run a scene and return its :class:`Result`; write result files if ``out`` is given.
 
     Compiled programs are kept in JAX's persistent compilation cache
@@ -326,6 +327,8 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         warm-up of the DEM) is above an hour; otherwise such a run is refused with
         :class:`LongRunError`, which names the keys that make it cheaper. With ``progress``
         the estimate is printed before the run starts.
+    figure_formats, dpi :
+        Formats (png, pdf, svg) and PNG resolution of the figures written into ``out``.
     """
     enable_compilation_cache()
     if not isinstance(scene, Scene):
@@ -341,6 +344,9 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     elif out is not None:
         check_out_dir(out)  # before the run, not after it
     start = time.perf_counter()
+    if progress and scene.motion.model in ("dem", "moving_bed", "pneumatic"):
+        print(f"{scene.name}: preparing the run (packing the bed, compiling, timing a warm-up) "
+              "...", file=sys.stderr, flush=True)
     motion = make_motion(scene)
     mesh = None
     devs = resolve_devices(devices)
@@ -365,7 +371,7 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     with _stop_on_ctrl_c():
         traj = simulate(motion, params, progress, mesh, monitor=monitor, resume=checkpoint)
     result = make_result(scene, traj, monitor.wall_time())
-    folder.complete(result)
+    folder.complete(result, figure_formats=tuple(figure_formats), dpi=dpi)
     return result
 
 

@@ -26,8 +26,12 @@ class SimProgress:
                 from tqdm.auto import tqdm
             except ImportError:
                 from tqdm.std import tqdm
+            # a terminal redraws one line; a log file (CI, nohup) gets a line per refresh, so
+            # refresh it rarely there
+            interactive = getattr(sys.stderr, "isatty", lambda: False)()
             self.bar = tqdm(total=self.duration, desc=self.desc, unit="s", delay=self.delay,
                             file=sys.stderr, dynamic_ncols=True,
+                            mininterval=0.5 if interactive else 30.0,
                             bar_format="{desc}: {percentage:3.0f}%|{bar}| t = {n:.4g} / "
                                        "{total:.4g} s [{elapsed}<{remaining}]")
         return self
