@@ -154,6 +154,10 @@ def test_row_spool_is_a_list_of_rows(tmp_path):
     np.testing.assert_array_equal(stacked["Q"]["gas"], [0.0, 1.0, 2.0, 3.0])
     assert isinstance(stacked["T"], np.memmap)
     assert stack_arrays(rows, "T", (r["T"] for r in rows)).shape == (4, 6)
+    # an empty dict (a run without heat accounts) comes back as one
+    empty = RowSpool(tmp_path / "empty", min_size=5)
+    empty.append({"T": np.arange(6.0), "Q": {}})
+    assert empty[0]["Q"] == {} and stack_rows(empty)["Q"] == {}
     # a checkpoint's view of it, and the spool rebuilt from it without the later rows
     again = RowSpool.from_state(tmp_path / "spool", spool.state()[:2], min_size=5)
     assert len(again) == 2 and not (tmp_path / "spool" / "0000003").exists()
@@ -241,3 +245,13 @@ def test_ctrl_c_on_the_command_line_stops_cleanly_and_resumes(tmp_path):
     assert ref.returncode == 0, ref.stderr
     pd.testing.assert_frame_equal(pd.read_csv(csv), pd.read_csv(tmp_path / "ref" /
                                                                 "timeseries.csv"))
+
+
+def test_a_run_without_heat_accounts_completes_into_a_folder(tmp_path):
+    """Mechanics only (the mixing scenes have no heat tables): the output rows carry an empty
+    heat-account dict, which the spool and the checkpoint must keep."""
+    scene = load_scene("weigler-glass-mixing-9.55", {
+        "groups.0.count": 10, "groups.1.count": 10, "run.duration": 0.1,
+        "run.output_interval": 0.05, "run.checkpoint_interval": 0.05})
+    res = dh.run(scene, out=tmp_path / "mix", progress=False)
+    assert res.summary["complete"] and "interfraction_contacts" in res.timeseries

@@ -24,11 +24,14 @@ __all__ = ["RowSpool", "stack_rows", "stack_arrays", "flatten_dict", "unflatten_
 
 
 def flatten_dict(tree, prefix: str = "") -> dict:
-    """A nested dict of arrays as ``{"a/b/c": array}`` (keys must not contain ``/``)."""
+    """A nested dict of arrays as ``{"a/b/c": array}`` (keys must not contain ``/``); an empty
+    dict is kept as the key ``"a/b/"`` with an empty array, so that it comes back."""
     out = {}
     for k, v in tree.items():
         key = f"{prefix}{k}"
-        if isinstance(v, dict):
+        if isinstance(v, dict) and not v:
+            out[key + "/"] = np.zeros(0)
+        elif isinstance(v, dict):
             out.update(flatten_dict(v, key + "/"))
         else:
             out[key] = v if isinstance(v, OnDisk) else np.asarray(v)
@@ -43,7 +46,8 @@ def unflatten_dict(flat: dict) -> dict:
         node = out
         for p in parts[:-1]:
             node = node.setdefault(p, {})
-        node[parts[-1]] = v
+        if parts[-1]:  # "a/b/" is an empty dict, made by the loop above
+            node[parts[-1]] = v
     return out
 
 
