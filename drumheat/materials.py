@@ -58,10 +58,15 @@ MATERIALS: dict[str, Material] = {
         # radiation is negligible at these temperatures, digest section 4).
         Material("aluminium", 2700.0, 900.0, 237.0, 7.0e10, 0.33, 0.9,
                  "weigler-thermal-dem.md Table 2-1, 3-1; nu, eps typical"),
-        # weigler-thermal-dem.md, Table 2-1 / Table 5-1. Conductivity 1.0 W/(m K) and
-        # poisson 0.25 are typical soda-lime values (the thesis does not need them).
+        # weigler-thermal-dem.md, Table 2-1 / Table 5-1. E = 1.95e11 Pa is the thesis' value,
+        # kept because the thesis' stiffness k_n = E A_p / d_p = 1.22e9 N/m [2.3] is built on
+        # it; soda-lime glass is about 7e10 Pa (about a third). drumheat's scenes soften the
+        # stiffness anyway (dem.stiffness), so E enters only the default stiffness and the
+        # Hertz-type estimates. Conductivity 1.0 W/(m K) and poisson 0.25 are typical
+        # soda-lime values (the thesis does not need them).
         Material("glass", 2500.0, 836.0, 1.0, 1.95e11, 0.25, 0.9,
-                 "weigler-thermal-dem.md Table 2-1, 5-1; lambda, nu, eps typical"),
+                 "weigler-thermal-dem.md Table 2-1, 5-1 (E: the thesis' value, about 3x real "
+                 "soda-lime glass); lambda, nu, eps typical"),
         # kraychev-tube-bundle.md issue 7 / section 3: wheat d = 4.07 mm, 1315 kg/m3,
         # 1520 J/(kg K). Conductivity and elastic data are typical literature values for grain.
         Material("wheat", 1315.0, 1520.0, 0.15, 3.0e8, 0.3, 0.9,
