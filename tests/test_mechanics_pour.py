@@ -58,3 +58,14 @@ def test_angle_of_repose_of_a_tilted_surface():
     # the wall-near ends are excluded
     surf = free_surface(pos, r, central_fraction=0.5)
     assert np.all(np.abs(surf[:, 0]) <= 0.021)
+
+
+def test_a_bed_that_does_not_settle_warns_with_advice():
+    from drumheat.mechanics.pour import PourWarning
+
+    R, r, n = 0.025, 0.002, 30
+    p = contact_params(2e4, restitution=0.5, friction=0.5, wall_friction=0.5)
+    with pytest.warns(PourWarning, match="harmless") as rec:
+        pour(np.full(n, r), 2700.0, [DrumShell(R, rpm=12.0)], p, dim=2, min_time=0.01,
+             max_time=0.01, chunk=100)
+    assert "dem.settle_time" in str(rec[0].message)

@@ -34,6 +34,7 @@ from drumheat.mechanics.integrator import make_dem, make_particles
 
 __all__ = [
     "Packing",
+    "PourWarning",
     "pour",
     "insertion_sites",
     "save_packing",
@@ -283,6 +284,11 @@ def pour_sections(radius, density, walls, params, *, n_sections, phase, dim, gro
     return Packing(pos, r_all, grp, rho_all, pt, info)
 
 
+class PourWarning(UserWarning):
+    """A poured bed did not come to rest within the settling time (what it means and what to do
+    is in the message)."""
+
+
 def _settle(idx, pos, r_all, rho_all, pt, walls, params, dim, periodic_length, bounds, gravity,
             dt, safety_factor, ke_tol, g_norm, min_time, max_time, chunk, dtype, verbose):
     particles = make_particles(r_all[idx], rho_all[idx], ptype=pt[idx])
@@ -306,8 +312,15 @@ def _settle(idx, pos, r_all, rho_all, pt, walls, params, dim, periodic_length, b
         if ke < threshold:
             break
         if steps >= n_max:
-            warnings.warn(f"pour: kinetic energy {ke:.3g} J still above {threshold:.3g} J after "
-                          f"{max_time} s; returning the current state", stacklevel=3)
+            warnings.warn(
+                f"the poured bed has not come to rest after {max_time} s of settling (kinetic "
+                f"energy {ke:.3g} J, rest means below {threshold:.3g} J = {ke_tol} x the bed's "
+                "weight x one diameter); the run starts from this still-moving bed. In a turning "
+                "drum that is harmless (the bed is set moving anyway; leave the first "
+                "revolution out of averages, e.g. with dem.replay_cycle); for a resting bed or "
+                "a packing you want to measure, settle it longer (dem.settle_time) or use "
+                "softer contacts with more damping while it settles",
+                PourWarning, stacklevel=3)
             break
         state = dem.run(state, chunk, chunk=chunk)
         steps += chunk
