@@ -173,6 +173,26 @@ def read_data(path):
     return pos, V[:, 1:4], V[:, 4:7], 0.5 * A[:, 2], zhi - zlo
 
 
+def timed_steps(dem, state, steps, warm):
+    """``warm`` steps (compilation, tangential history), then ``steps`` timed ones:
+    ``(state after the warm-up, final state, timing dict)`` with the machine's load before and
+    the CPU steal during the timing."""
+    t0 = time.perf_counter()
+    state = dem.run(state, warm, chunk=warm)
+    jax.block_until_ready(state.position)
+    t_warm = time.perf_counter() - t0
+    ld = load()
+    r0 = int(state.n_rebuilds)
+    c0 = cpu_ticks()
+    t0 = time.perf_counter()
+    out = dem.run(state, steps, chunk=steps)
+    jax.block_until_ready(out.position)
+    wall = time.perf_counter() - t0
+    steal = steal_percent(c0, cpu_ticks())
+    return state, out, dict(rate=dem.particles.n * steps / wall, wall=wall, load=ld,
+                            steal=steal, warm_s=t_warm, rebuilds=int(out.n_rebuilds) - r0)
+
+
 def drumheat_setup(dat, thermal, pair_kernel="jax"):
     pos, vel, omega, radius, L = read_data(dat)
     part = make_particles(radius, RHO)
@@ -193,26 +213,13 @@ def drumheat_setup(dat, thermal, pair_kernel="jax"):
 
 def time_drumheat(dat, steps, warm, thermal, pair_kernel="jax"):
     dem, state = drumheat_setup(dat, thermal, pair_kernel)
-    n = dem.particles.n
-    t0 = time.perf_counter()
-    state = dem.run(state, warm, chunk=warm)  # compiles; builds the tangential history
-    jax.block_until_ready(state.position)
-    t_warm = time.perf_counter() - t0
-    ld = load()
-    r0 = int(state.n_rebuilds)
-    c0 = cpu_ticks()
-    t0 = time.perf_counter()
-    out = dem.run(state, steps, chunk=steps)
-    jax.block_until_ready(out.position)
-    wall = time.perf_counter() - t0
-    steal = steal_percent(c0, cpu_ticks())
+    state, out, r = timed_steps(dem, state, steps, warm)
     extra = ""
     if thermal:
         e = float(jnp.sum(out.extra * dem.particles.mass * C_P)
                   - jnp.sum(state.extra * dem.particles.mass * C_P))
         extra = f"change of the heat content {e:.2e} J (conduction only: round-off)"
-    return dict(rate=n * steps / wall, wall=wall, load=ld, steal=steal, warm_s=t_warm,
-                rebuilds=int(out.n_rebuilds) - r0, note=extra)
+    return dict(r, note=extra)
 
 
 def scene_for(n, backend="auto"):
@@ -234,23 +241,10 @@ def time_scene(n, steps, warm, backend="auto"):
     motion = make_motion(scene_for(n, backend))
     state = motion.initial_state()  # pours the bed (not timed)
     t_setup = time.perf_counter() - t0
-    dem = motion.dem
-    t0 = time.perf_counter()
-    state = dem.run(state, warm, chunk=warm)  # compiles
-    jax.block_until_ready(state.position)
-    t_warm = time.perf_counter() - t0
-    ld = load()
-    r0 = int(state.n_rebuilds)
-    c0 = cpu_ticks()
-    t0 = time.perf_counter()
-    out = dem.run(state, steps, chunk=steps)
-    jax.block_until_ready(out.position)
-    wall = time.perf_counter() - t0
-    steal = steal_percent(c0, cpu_ticks())
-    return dict(rate=n * steps / wall, wall=wall, load=ld, steal=steal, warm_s=t_warm,
-                rebuilds=int(out.n_rebuilds) - r0, backend=motion.contact_backend().backend,
-                note=f"scene path, backend {motion.contact_backend().backend}, set-up "
-                     f"{t_setup:.0f} s, warm-up {t_warm:.0f} s")
+    _, _, r = timed_steps(motion.dem, state, steps, warm)
+    backend = motion.contact_backend().backend
+    return dict(r, backend=backend, note=f"scene path, backend {backend}, set-up "
+                                         f"{t_setup:.0f} s, warm-up {r['warm_s']:.0f} s")
 
 
 def time_liggghts(rst, work, n, steps, warm, ranks, thermal):

@@ -174,6 +174,18 @@ class GasConfig(Table):
                                           "fluidized-bed-exercise.md section 4).")
 
 
+def _gap_doc(diameter: str) -> str:
+    """The doc of ``[heat.contact]`` / ``[heat.wall]`` ``gap_tolerance``."""
+    return (f"A contact conducts while the surfaces overlap or the gap between them is at most "
+            f"this fraction of the {diameter} diameter (weigler eq. [2.4] with a tolerance): "
+            "the gas gap next to a contact conducts about as well as the contact itself "
+            "(Schluender's model, weigler section 3), and soft DEM contacts chatter open and "
+            "shut by far less than 1 % of d. The same definition in every motion model (static "
+            "beds, DEM, recording and replay, contact counts); the conductance alpha A_p does "
+            "not depend on the overlap, so softened stiffness does not change it. 0: while "
+            "they overlap only.")
+
+
 @dataclass(frozen=True)
 class ContactConfig(Table):
     """``[heat.contact]``: particle-particle contact conduction (weigler eq. [2.7])."""
@@ -186,20 +198,7 @@ class ContactConfig(Table):
     alpha: Optional[float] = spec(None, unit="W/(m2 K)", gt=0,
                                   doc="alpha_pp on the projected area pi d^2/4; required for "
                                       "model 'constant'.")
-    gap_tolerance: float = spec(0.01, ge=0, lt=0.5,
-                                doc="A contact conducts while the surfaces overlap or the gap between them is at most "
-                                        "this fraction of the smaller diameter "
-                                        "(weigler eq. [2.4] with a tolerance): the gas "
-                                        "gap next to a contact conducts about as well "
-                                        "as the contact itself (Schluender's model, "
-                                        "weigler section 3), and soft DEM contacts "
-                                        "chatter open and shut by far less than 1 % of "
-                                        "d. The same definition in every motion model "
-                                        "(static beds, DEM, recording and replay, "
-                                        "contact counts); the conductance alpha A_p "
-                                        "does not depend on the overlap, so softened "
-                                        "stiffness does not change it. 0: while they "
-                                        "overlap only.")
+    gap_tolerance: float = spec(0.01, ge=0, lt=0.5, doc=_gap_doc("smaller"))
 
 
 @dataclass(frozen=True)
@@ -221,20 +220,7 @@ class WallConfig(Table):
             "its 370-sphere drum, weigler digest sections 6.6 and 12.9). Without it only "
             "drumheat's own alpha_overall (running mean of the wall contacts) and the "
             "convention-free alphaA_overall (W/K) are written.")
-    gap_tolerance: float = spec(0.01, ge=0, lt=0.5,
-                                doc="A contact conducts while the surfaces overlap or the gap between them is at most "
-                                        "this fraction of the particle's diameter "
-                                        "(weigler eq. [2.4] with a tolerance): the gas "
-                                        "gap next to a contact conducts about as well "
-                                        "as the contact itself (Schluender's model, "
-                                        "weigler section 3), and soft DEM contacts "
-                                        "chatter open and shut by far less than 1 % of "
-                                        "d. The same definition in every motion model "
-                                        "(static beds, DEM, recording and replay, "
-                                        "contact counts); the conductance alpha A_p "
-                                        "does not depend on the overlap, so softened "
-                                        "stiffness does not change it. 0: while they "
-                                        "overlap only.")
+    gap_tolerance: float = spec(0.01, ge=0, lt=0.5, doc=_gap_doc("particle's"))
 
 
 @dataclass(frozen=True)
