@@ -254,7 +254,7 @@ def test_gap_tolerance_of_the_jax_heat_flow():
     dist = jnp.array([1.99 * r, 2.06 * r, 4.05 * r, 0.0])
     touching = dist < 2 * r
     contacts = Contacts(i, j, touching & (i < 3), None, jnp.where(touching, dist, 0.0), None,
-                        *[None] * 6)
+                        *[None] * 8)
     T = jnp.asarray([300.0, 320.0, 350.0])
     radius = jnp.full(3, r)
 
