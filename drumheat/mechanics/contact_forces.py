@@ -277,17 +277,14 @@ class ContactResult(NamedTuple):
     sliding: jax.Array  # (...,) bool: Coulomb limit reached
 
 
-def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt, active,
-                v_rel_half=None):
+def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt, active):
     """Linear spring-dashpot contact with Cundall-Strack tangential history (one step).
 
     Args (arrays broadcast over contacts, vectors have a trailing dim axis):
       n: unit normal from partner A to partner B.
       overlap: ``delta = R_A + R_B - distance`` (m) (Weigler digest [2.4]).
       v_rel: velocity of B's contact point relative to A's (m/s) at the force evaluation time
-        (used by the dashpots).
-      v_rel_half: the same from the half-step velocities, whose ``dt`` multiple is the relative
-        displacement over the step (used for the tangential spring increment); default v_rel.
+        (used by the dashpots and, times dt, as the tangential spring increment).
       m_eff: effective mass m* (kg). kn, kt (N/m), zeta_n, zeta_t (-), mu (-).
       spring: tangential spring xi from the previous step (m).
       dt: time step (s). active: bool, the contact exists (delta > 0 and a valid pair).
@@ -300,17 +297,13 @@ def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt
     fn = jnp.maximum(kn * overlap - gn * vn, 0.0)
     fn = jnp.where(active, fn, 0.0)
     vt = v_rel - vn[..., None] * n
-    if v_rel_half is None:
-        vt_half = vt
-    else:
-        vt_half = v_rel_half - jnp.sum(v_rel_half * n, axis=-1)[..., None] * n
     # rotate the stored spring onto the current tangent plane, keeping its length
     xi_n = jnp.sum(spring * n, axis=-1)
     xi_p = spring - xi_n[..., None] * n
     len_old = _norm(spring)
     len_p = _norm(xi_p)
     scale = jnp.where(len_p > 0, len_old / jnp.where(len_p > 0, len_p, 1.0), 1.0)
-    xi = xi_p * scale[..., None] + vt_half * dt
+    xi = xi_p * scale[..., None] + vt * dt
     fs = -kt[..., None] * xi if jnp.ndim(kt) else -kt * xi
     fs_len = _norm(fs)
     f_coul = mu * fn

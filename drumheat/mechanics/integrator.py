@@ -706,19 +706,14 @@ def make_dem(
         cpu_params = cpu_kernel.kernel_params(params, n_w, dtype, dt, wall_omega,
                                               periodic_length, rotation)
 
-    def forces(pos, vel, w, t, nbrs, pair_spring, wall_spring, vel_h=None, w_h=None,
-               temperature=None):
-        # the integrator passes one set of (half-step) velocities for the dashpots and the
-        # spring increment; the relative velocity is then computed once
-        split_h = vel_h is not None or w_h is not None
-        vel_h = vel if vel_h is None else vel_h
-        w_h = w if w_h is None else w_h
+    def forces(pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature=None):
+        # one set of (half-step) velocities for the dashpots and the spring increment
         force = mass[:, None] * g_vec
         torque = jnp.zeros_like(w)
         # ---- particle-particle -----------------------------------------------------------------
         i = nbrs.idx[0]
         j = nbrs.idx[1]
-        in_kernel = use_cpu_kernel and not split_h
+        in_kernel = use_cpu_kernel
         if in_kernel:
             # pairs and walls in one C++ loop (drumheat.mechanics.cpu_kernel), the wall geometry
             # from JAX; its per-slot outputs are already zero where nothing touches
@@ -743,7 +738,7 @@ def make_dem(
             w_cond = wall_gap_mask(wd, w_mask)
         else:
             force, torque, new_spring, ovl, dist, fn, active, max_ovl = pair_part(
-                pos, vel, w, nbrs, pair_spring, vel_h, w_h, split_h, force, torque, i, j)
+                pos, vel, w, nbrs, pair_spring, force, torque, i, j)
             pair_dist = dist  # every pair's, for the conduction gap tolerance (heat_flow)
             p_cond = active
             if gap_pp > 0:
@@ -751,7 +746,7 @@ def make_dem(
                 p_cond = (i < n) & (ovl >= -gap_pp * 2.0 * jnp.minimum(r_i, r_j))
             ovl = jnp.where(active, ovl, 0.0)
             dist = jnp.where(active, dist, 0.0)
-            wall_out = wall_part(pos, vel, w, t, wall_spring, vel_h, w_h, split_h, force,
+            wall_out = wall_part(pos, vel, w, t, wall_spring, force,
                                  torque, max_ovl)
             force, torque, new_wall_spring, max_ovl, w_part, w_idx, w_id, w_mask, w_ovl, w_fn = \
                 wall_out[:10]
@@ -769,7 +764,7 @@ def make_dem(
                                   conduction.coefficient, conduction.gap_tolerance, pair_dist)
         return force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat
 
-    def pair_part(pos, vel, w, nbrs, pair_spring, vel_h, w_h, split_h, force, torque, i, j):
+    def pair_part(pos, vel, w, nbrs, pair_spring, force, torque, i, j):
         valid = i < n
         ii = jnp.where(valid, i, 0)
         jj = jnp.where(valid, j, 0)
@@ -786,8 +781,6 @@ def make_dem(
         wi = w[ii]
         wj = w[jj]
         v_rel = (vel[jj] + cross_w_a(wj, a_j)) - (vel[ii] + cross_w_a(wi, a_i))
-        v_rel_h = ((vel_h[jj] + cross_w_a(w_h[jj], a_j)) - (vel_h[ii] + cross_w_a(w_h[ii], a_i))
-                   if split_h else None)
         mi = mass[ii]
         mj = mass[jj]
         m_eff = mi * mj / (mi + mj)
@@ -796,7 +789,7 @@ def make_dem(
         res = contact_law(nrm, ovl, v_rel, m_eff,
                           table(params.kn_pp, ti, tj), table(params.kt_pp, ti, tj),
                           table(params.zeta_n_pp, ti, tj), table(params.zeta_t_pp, ti, tj),
-                          table(params.mu_pp, ti, tj), pair_spring, dt_c, active, v_rel_h)
+                          table(params.mu_pp, ti, tj), pair_spring, dt_c, active)
         f = res.force
         seg = jnp.concatenate([i, j])  # padding N is dropped by segment_sum
         if not rotation:
@@ -828,7 +821,7 @@ def make_dem(
         max_ovl = jnp.max(jnp.where(active, ovl / rmin_pair, 0.0), initial=0.0)
         return force, torque, res.spring, ovl, dist, res.normal_force, active, max_ovl
 
-    def wall_part(pos, vel, w, t, wall_spring, vel_h, w_h, split_h, force, torque, max_ovl):
+    def wall_part(pos, vel, w, t, wall_spring, force, torque, max_ovl):
         # ---- particle-wall ---------------------------------------------------------------------
         if n_w > 0:
             wd, wn, wv = wall_geometry(pos, t)
@@ -837,12 +830,11 @@ def make_dem(
             wact = wovl > 0
             a = -(r_ - 0.5 * wovl)[..., None] * wn
             v_relw = vel[:, None, :] + cross_w_a(w[:, None], a) - wv
-            v_relw_h = (vel_h[:, None, :] + cross_w_a(w_h[:, None], a) - wv) if split_h else None
             m_w = jnp.broadcast_to(mass[:, None], wd.shape)
             resw = contact_law(wn, wovl, v_relw, m_w,
                                wall_table(params.kn_pw), wall_table(params.kt_pw),
                                wall_table(params.zeta_n_pw), wall_table(params.zeta_t_pw),
-                               wall_table(params.mu_pw), wall_spring, dt_c, wact, v_relw_h)
+                               wall_table(params.mu_pw), wall_spring, dt_c, wact)
             force = force + jnp.sum(resw.force, axis=1)
             if rotation:
                 tq = cross_a_f(a, resw.force)
