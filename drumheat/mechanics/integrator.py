@@ -588,7 +588,7 @@ def make_dem(
     if conduction is not None:
         conduction = PairConduction(*conduction).checked(particles.n)
     if use_cpu_kernel:
-        from drumheat.mechanics import cpu_kernel
+        import drumheat.mechanics.cpu_kernel as cpu_kernel
 
         cpu_kernel.check_supported(dim, params, dtype, batch_axis)
         cpu_kernel.load()
