@@ -168,7 +168,7 @@ def _check_overlaps(s, key, path, pos, d) -> None:
         box = np.array([np.inf, np.inf, s.drum.depth])
         box[:2] = 1e9
         pos[:, :2] += 1e8
-    pairs = np.array(sorted(cKDTree(pos, boxsize=box).query_pairs(float(d.max()))), int)
+    pairs = cKDTree(pos, boxsize=box).query_pairs(float(d.max()), output_type="ndarray")
     if not len(pairs):
         return
     delta = pos[pairs[:, 0]] - pos[pairs[:, 1]]

@@ -1,0 +1,195 @@
+"""The built-in 3D drum scene at large N on whatever JAX device is default (a GPU where one is
+present): particle-steps per second and memory per particle, through the product path.
+
+Scene: ``glass-drum-3d`` (the LIGGGHTS benchmark drum: glass d = 8 mm, D = 0.25 m, 9.55 rpm,
+periodic axis at 35 % fill, k = 1e5 N/m, dt = 0.1 t_crit = 1.6e-5 s, contact conduction with
+the gap tolerance, contact times every step and a thermal step every ``dem.thermal_substeps``
+= 10) with ``groups.0.count = N`` and ``drum.depth = N x 2.6e-5 m`` (the scene's documented
+knob), ``dem.contact_backend = "jax"`` and the mechanics in ``--precision`` (the scene's default
+is float64; temperatures are float64 always).
+
+Packing: pouring 1e6 particles would cost more device time than the benchmark itself, so the
+bed is the scene's own poured N = 2000 slice (0.052 m deep, periodic along the axis; made by
+``--make-base`` on any machine, or on the spot if the file is missing) tiled N / 2000 times
+along the axis, given to the scene as ``packing.method = "file"``. The tiled bed is the poured
+one repeated, so contact counts per particle are those of the poured bed; it starts at rest,
+and the timing starts after ``--warm`` steps (compilation, first neighbour-list builds).
+
+For each (N, precision) a fresh process builds the motion model (``make_motion``) and times
+``DEM.run`` (chunked, with its overflow / NaN / escape checks) over enough steps for about
+``--seconds`` of wall time. Reported: particle-steps/s, neighbour-list rebuilds in the timed
+steps, the device's peak memory (``memory_stats()['peak_bytes_in_use']``, GPU) or the process's
+peak resident memory (CPU), both per particle, and the mean temperature change as a sanity
+check that heat moved.
+
+Usage: python scripts/bench_gpu.py [--n 100000 1000000] [--precision float32 float64]
+       [--seconds 15] [--warm 300] [--base FILE] [--json FILE]
+       python scripts/bench_gpu.py --make-base FILE     (pour the N = 2000 slice, save it)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+BASE_N, BASE_DEPTH = 2000, 0.052
+DEFAULT_BASE = Path(__file__).resolve().parents[1] / ".bench" / "glass-drum-3d-2000.npz"
+
+
+def scene(n: int, precision: str, packing_file=None):
+    """glass-drum-3d at N particles (depth = N x 2.6e-5 m), JAX contact backend."""
+    from drumheat.scene import load_scene
+
+    over = {"groups.0.count": n, "drum.depth": n * BASE_DEPTH / BASE_N,
+            "dem.contact_backend": "jax", "dem.precision": precision}
+    if packing_file is not None:
+        over.update({"packing.method": "file", "packing.file": str(packing_file)})
+    return load_scene("glass-drum-3d", over)
+
+
+def make_base(path: Path) -> None:
+    """Pour the scene's N = 2000 slice and save its positions (packing file format)."""
+    import numpy as np
+
+    from drumheat.motion import make_motion
+
+    motion = make_motion(scene(BASE_N, "float64"))
+    pos = np.asarray(motion.packing_positions(), float)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, position=pos, diameter=np.full(BASE_N, 0.008), group=np.zeros(BASE_N, int))
+    print(f"poured {BASE_N} particles, saved {path}")
+
+
+def tiled(base: Path, n: int, out: Path) -> Path:
+    """The base slice repeated n / 2000 times along the periodic axis (seamless: the slice is
+    periodic with its depth)."""
+    import numpy as np
+
+    if n % BASE_N:
+        raise SystemExit(f"N must be a multiple of {BASE_N} (the poured slice is tiled)")
+    with np.load(base) as f:
+        pos = f["position"]
+    k = n // BASE_N
+    shift = np.zeros((k, 1, 3))
+    shift[:, 0, 2] = BASE_DEPTH * np.arange(k)
+    np.savez(out, position=(pos[None] + shift).reshape(n, 3), diameter=np.full(n, 0.008),
+             group=np.zeros(n, int))
+    return out
+
+
+def measure(n: int, precision: str, base: Path, seconds: float, warm: int) -> dict:
+    """In this process: build the scene at N, warm up, time; one dict of numbers."""
+    import resource
+    import tempfile
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from drumheat.motion import make_motion
+
+    t0 = time.perf_counter()
+    tmp = Path(tempfile.mkdtemp()) / f"packing-{n}.npz"
+    motion = make_motion(scene(n, precision, tiled(base, n, tmp)))
+    state = motion.initial_state()
+    dem = motion.dem
+    t_setup = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    state = dem.run(state, warm, chunk=warm)
+    jax.block_until_ready(state.position)
+    t_warm = time.perf_counter() - t0
+    probe = max(50, warm // 2)  # a first estimate of the rate, compiled already
+    t0 = time.perf_counter()
+    state = dem.run(state, probe, chunk=probe)
+    jax.block_until_ready(state.position)
+    per_step = (time.perf_counter() - t0) / probe
+    steps = int(max(200, min(50000, seconds / per_step)))
+    steps = -(-steps // probe) * probe  # whole chunks: the compiled chunk length is reused
+    T_before = float(jnp.mean(state.extra["T"])) if isinstance(state.extra, dict) and \
+        "T" in state.extra else float("nan")
+    r0 = int(state.n_rebuilds)
+    t0 = time.perf_counter()
+    out = dem.run(state, steps, chunk=probe)
+    jax.block_until_ready(out.position)
+    wall = time.perf_counter() - t0
+    T_after = float(jnp.mean(out.extra["T"])) if isinstance(out.extra, dict) and \
+        "T" in out.extra else float("nan")
+    dev = jax.devices()[0]
+    stats = dev.memory_stats() or {}
+    peak = stats.get("peak_bytes_in_use")
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    return dict(n=n, precision=precision, device=f"{dev.platform}:{dev.device_kind}",
+                jax=jax.__version__, steps=steps, wall_s=wall, rate=n * steps / wall,
+                rebuilds=int(out.n_rebuilds) - r0, setup_s=t_setup, warm_s=t_warm,
+                pair_capacity=int(out.nbrs.idx.shape[1]),
+                device_peak_bytes=peak, peak_rss_bytes=rss,
+                bytes_per_particle=(peak if peak else rss) / n,
+                dT_mean=T_after - T_before, finite=bool(np.all(np.isfinite(
+                    np.asarray(out.position)))))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[100000, 1000000])
+    ap.add_argument("--precision", nargs="+", default=["float32", "float64"],
+                    choices=["float32", "float64"])
+    ap.add_argument("--seconds", type=float, default=15.0, help="wall time of each timing")
+    ap.add_argument("--warm", type=int, default=300, help="steps before the timing")
+    ap.add_argument("--base", type=Path, default=DEFAULT_BASE, help="the poured N=2000 slice")
+    ap.add_argument("--json", type=Path, help="append each result as a JSON line here")
+    ap.add_argument("--timeout", type=float, default=600, help="per case (s)")
+    ap.add_argument("--make-base", type=Path, metavar="FILE")
+    ap.add_argument("--one", nargs=2, metavar=("N", "PRECISION"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.make_base:
+        make_base(args.make_base)
+        return
+    if args.one:
+        print("RESULT " + json.dumps(measure(int(args.one[0]), args.one[1], args.base,
+                                             args.seconds, args.warm)), flush=True)
+        return
+    if not args.base.exists():
+        make_base(args.base)
+    env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false")
+    rows = []
+    for prec in args.precision:
+        for n in args.n:
+            cmd = [sys.executable, __file__, "--one", str(n), prec, "--base", str(args.base),
+                   "--seconds", str(args.seconds), "--warm", str(args.warm)]
+            try:
+                p = subprocess.run(cmd, env=env, capture_output=True, text=True,
+                                   timeout=args.timeout)
+            except subprocess.TimeoutExpired:
+                print(f"N={n} {prec}: over {args.timeout:.0f} s, skipped", flush=True)
+                continue
+            res = [line[7:] for line in p.stdout.splitlines() if line.startswith("RESULT ")]
+            if not res:
+                print(f"N={n} {prec}: failed\n{p.stderr[-3000:]}", flush=True)
+                continue
+            r = json.loads(res[0])
+            rows.append(r)
+            if args.json:
+                with open(args.json, "a") as f:
+                    f.write(json.dumps(r) + "\n")
+            print(f"N={n} {prec}: {r['rate']:.3g} particle-steps/s "
+                  f"({r['steps']} steps in {r['wall_s']:.1f} s), "
+                  f"{r['bytes_per_particle'] / 1e3:.2f} kB/particle", flush=True)
+    if not rows:
+        return
+    print(f"\ndevice {rows[0]['device']}, JAX {rows[0]['jax']}")
+    print(f"{'N':>9} {'precision':>9} {'p-steps/s':>10} {'steps':>6} {'wall s':>7} "
+          f"{'rebuilds':>8} {'kB/part':>8} {'set-up s':>8} {'warm s':>7} {'dT_mean K':>10}")
+    for r in rows:
+        print(f"{r['n']:>9} {r['precision']:>9} {r['rate']:>10.3g} {r['steps']:>6} "
+              f"{r['wall_s']:>7.1f} {r['rebuilds']:>8} {r['bytes_per_particle'] / 1e3:>8.2f} "
+              f"{r['setup_s']:>8.0f} {r['warm_s']:>7.0f} {r['dT_mean']:>10.3g}")
+
+
+if __name__ == "__main__":
+    main()
