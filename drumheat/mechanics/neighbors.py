@@ -1,16 +1,27 @@
-"""Neighbour lists for DEM on top of ``jax_md.partition`` (cell list + Verlet skin).
+"""Neighbour lists for DEM: a cell list with a Verlet skin, built in constant memory per
+particle, stored in ``jax_md.partition``'s ``NeighborList`` (OrderedSparse format).
 
 * Format: ``OrderedSparse``: ``idx`` has shape (2, capacity); column k is the pair
   ``(i, j) = (idx[0, k], idx[1, k])`` with ``i < j``, each pair once; padding is ``N``.
   Per-pair data (tangential springs) live in arrays aligned with these columns.
-* Domain: jax-md's cell list bins positions in ``[0, box)``. The drum is centred on the axis,
-  so positions are shifted by ``-lo`` (the lower corner of the domain box, which includes a
-  margin) before they reach jax-md. In 3D the drum axis may be periodic (length L): then z is
-  kept in ``[0, L)`` and the displacement uses the minimum image along z only.
-* Rebuilds: jax-md is configured to rebuild whenever asked (``dr_threshold = 0`` with the
-  cutoff ``2 r_max + skin`` passed in full); the integrator decides when: as soon as some
-  particle has moved more than ``skin / 2`` since the last build (the usual Verlet-list
-  criterion), so no pair can come into contact unseen.
+* Pairs: every pair closer than the cutoff ``2 r_max + skin`` (plus the conduction gap), the
+  same set as ``jax_md.partition.neighbor_list`` finds (``tests/test_neighbors.py`` holds the
+  two equal). The build (:class:`CellGrid`) bins the particles into cells of side at least the
+  cutoff, sorts them by cell, and visits the 3^dim neighbouring cells one after the other
+  (``lax.fori_loop``), compacting each visit's hits into the pair buffer: its temporaries are
+  ``N x cell capacity`` per visit, some hundred bytes per particle, where jax-md gathers all
+  ``N x 3^dim x cell capacity`` candidates at once (about 10 kB per particle in 3D, the bulk
+  of a run's memory).
+* Domain: positions are shifted by ``-lo`` (the lower corner of the domain box, which includes a
+  margin) into ``[0, box)``. In 3D the drum axis may be periodic (length L): then z is
+  kept in ``[0, L)``, the cells wrap along it and the displacement uses the minimum image along
+  z only.
+* Rebuilds: the integrator decides when: as soon as some particle has moved more than
+  ``skin / 2`` since the last build (the usual Verlet-list criterion), so no pair can come into
+  contact unseen.
+* Overflow: a build flags ``NEIGHBOR_LIST_OVERFLOW`` (more pairs than the buffer holds) or
+  ``CELL_LIST_OVERFLOW`` (a cell holds more particles than the cell capacity) in the list's
+  ``error`` (jax-md's codes); the integrator then reallocates and redoes the chunk.
 * Pair order: after every build the pairs are sorted by ``(i, j)`` (:func:`sort_pairs`), so
   force sums do not depend on when the list was built.
 * History across rebuilds: after a rebuild, :func:`remap_pair_data` finds every new pair in the
@@ -21,6 +32,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable, Optional
 
 import jax
@@ -29,6 +41,7 @@ import numpy as np
 from jax_md import partition
 
 __all__ = [
+    "CellGrid",
     "make_displacement",
     "NeighborSetup",
     "make_neighbor_setup",
@@ -115,6 +128,130 @@ def sort_pairs(nbrs, n):
     return dataclasses.replace(nbrs, idx=jnp.stack([nbrs.idx[0][order], nbrs.idx[1][order]]))
 
 
+_CELL_OVERFLOW = int(partition.PEC.CELL_LIST_OVERFLOW)
+_PAIR_OVERFLOW = int(partition.PEC.NEIGHBOR_LIST_OVERFLOW)
+
+
+@dataclass(frozen=True)
+class CellGrid:
+    """The cell grid of a neighbour search and the build that visits it.
+
+    Attributes:
+      dim: 2 or 3; cutoff: pair cutoff (m); cells: cells per axis; cell_size: their side (m),
+      at least ``cutoff`` (an axis shorter than three cutoffs is one cell, so that no cell is
+      visited twice); periodic: whether the last axis wraps (the drum axis); displacement:
+      ``Ra - Rb`` with the minimum image along a periodic axis.
+    """
+
+    dim: int
+    cutoff: float
+    cells: tuple
+    cell_size: tuple
+    periodic: bool
+    displacement: Callable
+
+    @property
+    def n_cells(self) -> int:
+        return int(np.prod(self.cells))
+
+    def shifts(self) -> np.ndarray:
+        """Offsets of the neighbouring cells visited, (n, dim) int32: -1, 0, 1 along axes of
+        three or more cells, 0 along one-cell axes."""
+        axes = [(-1, 0, 1) if c >= 3 else (0,) for c in self.cells]
+        return np.array(np.meshgrid(*axes, indexing="ij"), np.int32).reshape(self.dim, -1).T
+
+    def cell_index(self, position):
+        """Cell coordinates (N, dim) int32 of box-frame positions (clipped to the grid; along
+        a periodic axis wrapped)."""
+        size = jnp.asarray(self.cell_size, position.dtype)
+        c = jnp.floor(position / size).astype(jnp.int32)
+        cells = jnp.asarray(self.cells, jnp.int32)
+        wrapped = jnp.mod(c, cells)
+        clipped = jnp.clip(c, 0, cells - 1)
+        if self.periodic:
+            return clipped.at[:, -1].set(wrapped[:, -1])
+        return clipped
+
+    def flat(self, coords):
+        """Flat cell number of cell coordinates (..., dim)."""
+        mult = np.cumprod((1,) + tuple(self.cells[:-1])).astype(np.int32)
+        return jnp.sum(coords * jnp.asarray(mult), axis=-1)
+
+    def visit(self, position, cell_capacity: int, on_hits, carry):
+        """Visit every pair closer than the cutoff once, one neighbouring cell at a time.
+
+        ``on_hits(carry, lo, hi, hit)`` receives, per visited cell offset, the candidate
+        pairs ``(lo, hi)`` (N, cell_capacity) int32 with ``lo < hi`` and the mask ``hit`` of
+        those within the cutoff, and returns the new carry. Returns ``(carry, fullest)``: the
+        final carry and the largest number of particles in one cell (above ``cell_capacity``
+        some pairs were missed: the caller flags the overflow).
+        """
+        n = position.shape[0]
+        cell = self.cell_index(position)
+        key = self.flat(cell)
+        order = jnp.argsort(key).astype(jnp.int32)
+        start = jnp.searchsorted(key[order], jnp.arange(self.n_cells, dtype=key.dtype),
+                                 side="left").astype(jnp.int32)
+        count = jax.ops.segment_sum(jnp.ones(n, jnp.int32), key, self.n_cells)
+        sorted_pos = position[order]
+        slot = jnp.arange(cell_capacity, dtype=jnp.int32)
+        me = jnp.arange(n, dtype=jnp.int32)
+        cells = jnp.asarray(self.cells, jnp.int32)
+        shifts = jnp.asarray(self.shifts())
+        cutoff_sq = self.cutoff**2
+
+        def one_offset(k, carry):
+            other = self.flat(jnp.mod(cell + shifts[k], cells))  # (N,)
+            s = start[other][:, None] + slot[None, :]  # (N, cap) into the sorted order
+            valid = slot[None, :] < count[other][:, None]
+            s = jnp.minimum(s, n - 1)
+            j = order[s]
+            # as jax-md: the squared length of displacement(R_larger, R_smaller) < cutoff^2
+            dR = self.displacement(position[:, None, :], sorted_pos[s])
+            close = jnp.sum(dR**2, axis=-1) < cutoff_sq
+            hit = valid & (j < me[:, None]) & close
+            return on_hits(carry, j, jnp.broadcast_to(me[:, None], j.shape), hit)
+
+        carry = jax.lax.fori_loop(0, int(shifts.shape[0]), one_offset, carry)
+        return carry, jnp.max(count)
+
+    def count_pairs(self, position, cell_capacity: int):
+        """``(pairs within the cutoff, fullest cell)`` (jittable)."""
+        def add(total, lo, hi, hit):
+            return total + jnp.sum(hit, dtype=jnp.int32)
+
+        return self.visit(position, cell_capacity, add, jnp.zeros((), jnp.int32))
+
+    def build(self, position, capacity: int, cell_capacity: int):
+        """``(idx (2, capacity) int32 padded with N, pairs found, fullest cell)``: the pairs in
+        the order found (:func:`sort_pairs` makes it canonical); pairs beyond ``capacity`` are
+        dropped and counted (jittable)."""
+        n = position.shape[0]
+
+        def add(carry, lo, hi, hit):
+            idx, total = carry
+            hit = hit.reshape(-1)
+            at = total + jnp.cumsum(hit, dtype=jnp.int32) - 1
+            at = jnp.where(hit, at, capacity)  # misses (and overflow) fall off the end
+            idx = idx.at[:, at].set(jnp.stack([lo.reshape(-1), hi.reshape(-1)]), mode="drop")
+            return idx, total + jnp.sum(hit, dtype=jnp.int32)
+
+        empty = jnp.full((2, capacity), n, jnp.int32)
+        (idx, total), fullest = self.visit(position, cell_capacity, add,
+                                           (empty, jnp.zeros((), jnp.int32)))
+        return idx, total, fullest
+
+
+def make_cell_grid(dim, box, cutoff, periodic_length, displacement) -> CellGrid:
+    """The grid of cells of side at least ``cutoff`` covering ``[0, box)``."""
+    box = np.asarray(box, float)
+    n = np.floor(box / cutoff).astype(int)
+    n = np.where(n >= 3, n, 1)
+    size = box / n
+    return CellGrid(int(dim), float(cutoff), tuple(int(c) for c in n),
+                    tuple(float(c) for c in size), periodic_length is not None, displacement)
+
+
 @dataclass(frozen=True)
 class NeighborSetup:
     """Static description of the neighbour search (built by :func:`make_neighbor_setup`).
@@ -123,7 +260,7 @@ class NeighborSetup:
       dim: spatial dimension; lo, box: lower corner and size of the domain box (m);
       periodic_length: drum-axis period L (m) or None; cutoff: ``2 r_max + skin`` (m);
       skin (m); capacity_multiplier: head room of a fresh allocation;
-      displacement: minimum-image displacement; neighbor_fns: jax-md allocate/update.
+      displacement: minimum-image displacement; grid: the :class:`CellGrid` that builds.
     """
 
     dim: int
@@ -134,47 +271,72 @@ class NeighborSetup:
     skin: float
     capacity_multiplier: float
     displacement: Callable
-    neighbor_fns: object
+    grid: CellGrid
 
     def to_box(self, position):
-        """Positions in jax-md's box frame (shifted by ``-lo``)."""
+        """Positions in the box frame (shifted by ``-lo``)."""
         return position - jnp.asarray(self.lo, dtype=position.dtype)
+
+    def _list(self, pos, idx, error, cell_capacity, capacity):
+        return partition.NeighborList(idx, pos, error, int(cell_capacity), int(capacity),
+                                      partition.NeighborListFormat.OrderedSparse,
+                                      self.cutoff, None, None)
 
     def allocate(self, position, min_capacity: int = 0, min_cell_capacity: int = 0):
         """Allocate a neighbour list at ``position`` (not jittable: it sizes the buffers).
 
         The pair capacity is ``capacity_multiplier`` times the current number of pairs, and at
-        least ``min_capacity`` (and at least 1); the cell-list capacity is jax-md's estimate
-        (``capacity_multiplier`` x the fullest cell) and at least ``min_cell_capacity``.
+        least ``min_capacity`` (and at least 1); the cell capacity ``capacity_multiplier`` x
+        the fullest cell, and at least ``min_cell_capacity``.
         """
-        import dataclasses
-
         pos = self.to_box(position)
-        nbrs = self.neighbor_fns.allocate(pos)
         n = position.shape[0]
-        cc = nbrs.cell_list_capacity
-        if cc is not None and cc < min_cell_capacity:
-            nbrs = self.neighbor_fns.allocate(pos, extra_capacity=int(min_cell_capacity - cc))
-        count = int(jnp.sum(nbrs.idx[0] < n))
-        target = max(int(min_capacity), int(count * self.capacity_multiplier) + 1, 1)
-        if nbrs.max_occupancy != target:
-            nbrs = dataclasses.replace(nbrs, max_occupancy=target)
-            nbrs = self.neighbor_fns.update(pos, nbrs)
-        return sort_pairs(nbrs, n)
+        fullest = int(_fullest_cell(self.grid, pos))
+        cell_cap = max(int(min_cell_capacity), int(fullest * self.capacity_multiplier), 1)
+        count, _ = _count_pairs(self.grid, pos, cell_cap)
+        target = max(int(min_capacity), int(int(count) * self.capacity_multiplier) + 1, 1)
+        idx, total, fullest = _build(self.grid, pos, target, cell_cap)
+        code = (_PAIR_OVERFLOW if int(total) > target else 0) | \
+            (_CELL_OVERFLOW if int(fullest) > cell_cap else 0)
+        error = partition.PartitionError(jnp.asarray(code, jnp.uint8))
+        return sort_pairs(self._list(pos, idx, error, cell_cap, target), n)
 
     def count_pairs(self, position):
         """Number of pairs within the cutoff at ``position`` (host-side, for sizing buffers)."""
-        nbrs = self.neighbor_fns.allocate(self.to_box(position))
-        return int(jnp.sum(nbrs.idx[0] < position.shape[0]))
+        pos = self.to_box(position)
+        return int(_count_pairs(self.grid, pos, max(int(_fullest_cell(self.grid, pos)), 1))[0])
 
     def rebuild(self, position, nbrs):
-        """Rebuild the list at ``position`` with the existing capacities (jittable)."""
-        return sort_pairs(self.neighbor_fns.update(self.to_box(position), nbrs), position.shape[0])
+        """Rebuild the list at ``position`` with the existing capacities (jittable); the
+        overflow flags accumulate in ``nbrs.error`` until the next allocation."""
+        pos = self.to_box(position)
+        cap = nbrs.idx.shape[1]
+        idx, total, fullest = self.grid.build(pos, cap, nbrs.cell_list_capacity)
+        error = nbrs.error.update(partition.PEC.NEIGHBOR_LIST_OVERFLOW, total > cap)
+        error = error.update(partition.PEC.CELL_LIST_OVERFLOW, fullest > nbrs.cell_list_capacity)
+        new = self._list(pos, idx, error, nbrs.cell_list_capacity, nbrs.max_occupancy)
+        return sort_pairs(new, position.shape[0])
 
     def max_displacement_sq(self, position, nbrs):
         """Largest squared displacement (m^2) of any particle since the last build."""
         d = jax.vmap(self.displacement)(self.to_box(position), nbrs.reference_position)
         return jnp.max(jnp.sum(d * d, axis=-1))
+
+
+@partial(jax.jit, static_argnums=0)
+def _fullest_cell(grid: CellGrid, pos):
+    return jnp.max(jax.ops.segment_sum(jnp.ones(pos.shape[0], jnp.int32),
+                                       grid.flat(grid.cell_index(pos)), grid.n_cells))
+
+
+@partial(jax.jit, static_argnums=(0, 2))
+def _count_pairs(grid: CellGrid, pos, cell_capacity: int):
+    return grid.count_pairs(pos, cell_capacity)
+
+
+@partial(jax.jit, static_argnums=(0, 2, 3))
+def _build(grid: CellGrid, pos, capacity: int, cell_capacity: int):
+    return grid.build(pos, capacity, cell_capacity)
 
 
 def make_neighbor_setup(dim, lo, hi, cutoff, skin, periodic_length=None,
@@ -188,13 +350,6 @@ def make_neighbor_setup(dim, lo, hi, cutoff, skin, periodic_length=None,
     if np.any(~np.isfinite(box)) or np.any(box <= 0):
         raise ValueError(f"neighbour box must be finite and positive, got lo={lo}, hi={hi}")
     disp = make_displacement(dim, periodic_length)
-    fns = partition.neighbor_list(
-        disp,
-        jnp.asarray(box),
-        r_cutoff=float(cutoff),
-        dr_threshold=0.0,
-        capacity_multiplier=float(capacity_multiplier),
-        format=partition.NeighborListFormat.OrderedSparse,
-    )
+    grid = make_cell_grid(dim, box, float(cutoff), periodic_length, disp)
     return NeighborSetup(dim, lo, box, periodic_length, float(cutoff), float(skin),
-                         float(capacity_multiplier), disp, fns)
+                         float(capacity_multiplier), disp, grid)
