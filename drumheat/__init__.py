@@ -48,7 +48,7 @@ _API = {
     "EnsembleResult": "drumheat.runner.ensemble", "Result": "drumheat.results.result",
     # results
     "plot": "drumheat.results.plot", "animate": "drumheat.results.animate",
-    "export_vtk": "drumheat.results.vtk",
+    "export_vtk": "drumheat.results.vtk", "particle_table": "drumheat.results.particles",
     # analysis
     "explain": "drumheat.analysis.advisor", "fit": "drumheat.analysis.calibrate",
     "Experiment": "drumheat.analysis.calibrate",

@@ -44,6 +44,39 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_new(args) -> int:
+    from drumheat.scene.template import write_new_scene
+
+    try:
+        path = write_new_scene(args.file, args.template, args.set, force=args.force)
+    except FileExistsError as err:
+        return _fail(str(err))
+    print(f"wrote {path} (from {args.template}). Next:\n"
+          f"  drumheat estimate {path}    steps and wall time, before you commit to a run\n"
+          f"  drumheat explain {path}     which heat-transfer effects matter\n"
+          f"  drumheat run {path}         run it (results in results/{path.stem}/)")
+    return 0
+
+
+def _cmd_estimate(args) -> int:
+    from drumheat.motion import make_motion
+    from drumheat.runner.loop import estimate
+    from drumheat.scene import load_scene
+
+    scene = load_scene(args.scene, args.set)
+    print(f"{scene.name}: preparing (packing the bed, compiling, timing a warm-up) ...",
+          file=sys.stderr, flush=True)
+    cost = estimate(make_motion(scene))
+    if cost is None:
+        print(f"{scene.name}: motion model {scene.motion.model!r} makes no estimate; its runs "
+              "take seconds to minutes")
+        return 0
+    print(cost["text"])
+    if cost.get("cheaper"):
+        print(f"cheaper: {cost['cheaper']}")
+    return 0
+
+
 def _cmd_explain(args) -> int:
     from drumheat.analysis.advisor import explain
     from drumheat.scene import load_scene
@@ -98,6 +131,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="continue the run whose checkpoint is in the result folder (the same "
                         "scene and overrides)")
     r.set_defaults(func=_cmd_run)
+    n = sub.add_parser("new", help="write a new scene file from a built-in scene (comments "
+                                   "kept), with changes")
+    n.add_argument("file", metavar="FILE", help="the new scene file, e.g. my-drum.toml (its "
+                                                "name is the file's stem)")
+    n.add_argument("--from", dest="template", default="glass-drum-3d", metavar="SCENE",
+                   help="built-in scene or scene file to start from (default glass-drum-3d, "
+                        "a heated 3D turning drum); 'drumheat scenes' lists them")
+    n.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="change a value by its dotted key, e.g. groups.0.count=3000 "
+                        "(repeatable); checked before the file is written")
+    n.add_argument("--force", action="store_true", help="overwrite an existing file")
+    n.set_defaults(func=_cmd_new)
+    m = sub.add_parser("estimate", help="what a run will cost before it starts: steps and "
+                                        "estimated wall time (packs the bed, times a warm-up)")
+    m.add_argument("scene", help="built-in scene name or path to a .toml scene file")
+    m.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene value by its dotted key (repeatable)")
+    m.set_defaults(func=_cmd_estimate)
     e = sub.add_parser("explain", help="size of each heat-transfer effect in a scene, and which "
                                        "to drop or add")
     e.add_argument("scene", help="built-in scene name or path to a .toml scene file")

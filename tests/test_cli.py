@@ -89,3 +89,46 @@ def test_figures_in_vector_formats(tmp_path, capsys):
     for name in ("mean_temperatures", "snapshot_final"):
         assert (out / f"{name}.pdf").is_file() and (out / f"{name}.svg").is_file()
         assert not (out / f"{name}.png").exists()
+
+
+def test_new_scene_from_a_builtin(tmp_path, capsys):
+    """`drumheat new` copies the template with its comments, writes each change into its
+    table, and the file runs as a scene."""
+    from drumheat.scene import load_scene
+
+    path = tmp_path / "my-drum.toml"
+    assert main(["new", str(path), "--set", "groups.0.count=1000", "--set", "drum.rpm=5",
+                 "--set", "drum.depth=0.026", "--set", "run.duration=1"]) == 0
+    assert "drumheat estimate" in capsys.readouterr().out
+    text = path.read_text()
+    template = load_scene("glass-drum-3d")
+    assert "# The LIGGGHTS benchmark drum" in text  # the template's comments are kept
+    assert "rpm = 5  # changed by drumheat new" in text
+    scene = load_scene(path)
+    assert scene.name == "my-drum" and scene.n_particles == 1000 and scene.drum.rpm == 5
+    assert scene.heat == template.heat and scene.dem == template.dem
+    # a table switched off, a key added
+    other = tmp_path / "quiet.toml"
+    assert main(["new", str(other), "--from", "weigler-static", "--set", "heat.loss=none",
+                 "--set", "run.seed=7"]) == 0
+    s = load_scene(other)
+    assert s.heat.loss is None and s.run.seed == 7
+    assert load_scene("weigler-static").heat.loss is not None
+
+
+def test_new_scene_refuses_bad_input_and_keeps_files(tmp_path, capsys):
+    path = tmp_path / "mine.toml"
+    assert main(["new", str(path), "--set", "dem.stifness=1e5"]) == 2
+    assert "mean 'stiffness'" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # nothing half-written
+    path.write_text("# mine\n")
+    assert main(["new", str(path)]) == 2
+    assert "exists" in capsys.readouterr().err and path.read_text() == "# mine\n"
+    assert main(["new", str(path), "--force"]) == 0
+    assert path.read_text() != "# mine\n"
+
+
+def test_estimate_prints_the_cost_before_a_run(capsys):
+    assert main(["estimate", "weigler-mixed"]) == 0
+    out = capsys.readouterr().out
+    assert "mechanical steps" in out and "estimated wall time" in out

@@ -132,10 +132,22 @@ def animate(result_dir, out=None, fps: float = 10, fmt: str | None = None, dpi: 
                     bbox=dict(boxstyle="round", fc="white", ec="0.6", alpha=0.85))
     title.set_text(frames.name)
 
+    three_d = frames.position.shape[-1] == 3
+    if three_d:
+        vmin = float(np.min(frames.T) - plot.C0) if vmin is None else vmin
+        vmax = float(np.max(frames.T) - plot.C0) if vmax is None else vmax
+
     def draw(k):
+        nonlocal coll
         i = int(idx[k])
-        coll.set_offsets(frames.position[i][:, :2])
-        coll.set_array(frames.T[i] - plot.C0)
+        if three_d:  # the mid-depth slice: which particles it cuts changes from frame to frame
+            pos, d, T_C, note = plot.cross_section(frames, i)
+            coll.remove()
+            coll = plot.draw_particles(ax, pos, d, T_C, vmin=vmin, vmax=vmax)
+            title.set_text(f"{frames.name}\n{note}")
+        else:
+            coll.set_offsets(frames.position[i][:, :2])
+            coll.set_array(frames.T[i] - plot.C0)
         clock.set_text(plot.format_clock(float(frames.t[i])))
 
     out.parent.mkdir(parents=True, exist_ok=True)

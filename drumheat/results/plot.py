@@ -643,6 +643,23 @@ def plot_alpha_overall(result, ax=None, smooth=None):
 # ---------------------------------------------------------------------------------------------
 
 
+def cross_section(frames: ParticleFrames, index: int):
+    """The particles a cross-section figure draws at output ``index``: ``(xy (M, 2) m,
+    diameter (M,) m, temperature (M,) degC, note)``. In 2D all particles (note ""); in 3D the
+    slice through the middle of the drum's depth, the particles whose centres lie within half
+    a diameter of the mid-plane (those the plane cuts), with a note saying how many."""
+    pos, d = np.asarray(frames.position[index]), np.asarray(frames.diameter)
+    T_C = np.asarray(frames.T[index]) - C0
+    if pos.shape[1] != 3:
+        return pos, d, T_C, ""
+    z = pos[:, 2]
+    depth = getattr(getattr(frames.scene, "drum", None), "depth", None)
+    z_mid = 0.5 * depth if depth else 0.5 * (z.min() + z.max())
+    cut = np.abs(z - z_mid) <= 0.5 * d
+    return (pos[cut][:, :2], d[cut], T_C[cut],
+            f"slice at mid-depth: {int(np.sum(cut))} of {len(cut)} particles")
+
+
 def plot_snapshot(result, index=-1, ax=None, vmin=None, vmax=None, walls=None, colorbar=True):
     """The drum cross-section with particles to scale, coloured by temperature (degC and K).
 
@@ -675,15 +692,8 @@ def plot_snapshot(result, index=-1, ax=None, vmin=None, vmax=None, walls=None, c
     vmax = float(np.max(T_C)) if vmax is None else vmax
     if vmax <= vmin:
         vmin, vmax = vmin - 0.5, vmax + 0.5
-    pos, d, T_i = np.asarray(fr.position[index]), np.asarray(fr.diameter), T_C[index]
-    title = f"{fr.name}, {format_clock(float(fr.t[index]))}"
-    if pos.shape[1] == 3:  # the mid-depth slice
-        z = pos[:, 2]
-        depth = getattr(getattr(fr.scene, "drum", None), "depth", None)
-        z_mid = 0.5 * depth if depth else 0.5 * (z.min() + z.max())
-        cut = np.abs(z - z_mid) <= 0.5 * d
-        pos, d, T_i = pos[cut][:, :2], d[cut], T_i[cut]
-        title += f"\nslice at mid-depth: {int(np.sum(cut))} of {len(cut)} particles"
+    pos, d, T_i, note = cross_section(fr, index)
+    title = f"{fr.name}, {format_clock(float(fr.t[index]))}" + (f"\n{note}" if note else "")
     coll = draw_particles(ax, pos, d, T_i, vmin=vmin, vmax=vmax)
     draw_walls(ax, walls, t=float(fr.t[index]))
     _setup_cross_section(ax, walls, pos, d)

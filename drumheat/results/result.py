@@ -59,6 +59,13 @@ class Result:
     def T(self) -> np.ndarray:
         return self.trajectory.T
 
+    def particles(self, every: int = 1) -> pd.DataFrame:
+        """One row per particle and output time: ``t``, ``particle``, ``group``, ``diameter``,
+        ``T``, ``x``, ``y`` (``z``), ``heat_rate`` (see :func:`drumheat.particle_table`)."""
+        from drumheat.results.particles import particle_table
+
+        return particle_table(self, every)
+
     def save(self, out_dir: str | Path | None = None, figures: bool = True,
              figure_formats=("png",), dpi: int = 120) -> Path:
         """Write the result files (see DESIGN.md) to ``out_dir`` (default results/<scene>);

@@ -15,7 +15,10 @@ ParaView (or any VTK reader) opens directly, written with numpy and the standard
     - ``group`` (-): group index (the names are in the field data ``group_names``);
     - ``velocity`` (m/s): finite differences of the positions between outputs (central inside,
       one-sided at the ends; zeros for a resting bed);
-    - ``id`` (-): particle index, the same at every time.
+    - ``id`` (-): particle index, the same at every time;
+    - ``heat_rate`` (W): mean heat flow into the particle over the output interval ending at
+      this time (:func:`drumheat.results.particles.heat_rates`; 0 at the first output), for
+      lumped particles of a scene at hand.
 
   Points are always 3D; a 2D scene has z = 0. The field data hold ``TIME`` (s) and the group
   names.
@@ -247,6 +250,7 @@ def export_vtk(result_dir, out_dir=None, binary: bool = True, n_segments: int = 
     import shutil
     import tempfile
 
+    from drumheat.results.particles import heat_rates
     from drumheat.results.plot import read_particles, scene_walls
 
     frames = read_particles(result_dir)
@@ -256,6 +260,7 @@ def export_vtk(result_dir, out_dir=None, binary: bool = True, n_segments: int = 
     try:
         pos3 = _to_3d(frames.position)
         vel = _to_3d(particle_velocities(frames.t, frames.position))
+        q = heat_rates(frames)
         n = pos3.shape[1]
         radius = 0.5 * frames.diameter
         ids = np.arange(n)
@@ -268,11 +273,13 @@ def export_vtk(result_dir, out_dir=None, binary: bool = True, n_segments: int = 
         width = max(4, len(str(len(frames.t) - 1)))
         for k, t in enumerate(frames.t):
             name = f"particles_{k:0{width}d}.vtp"
+            point_data = {"radius": (radius, 1), "temperature": (frames.T[k], 1),
+                          "group": (frames.group.astype(np.int32), 1),
+                          "velocity": (vel[k], 3), "id": (ids.astype(np.int32), 1)}
+            if q is not None:  # W into each particle over the interval ending here
+                point_data["heat_rate"] = (np.nan_to_num(q[k]), 1)
             doc = _polydata_xml(
-                pos3[k],
-                point_data={"radius": (radius, 1), "temperature": (frames.T[k], 1),
-                            "group": (frames.group.astype(np.int32), 1),
-                            "velocity": (vel[k], 3), "id": (ids.astype(np.int32), 1)},
+                pos3[k], point_data=point_data,
                 verts=verts, field_data={"TIME": [float(t)], "group_names": names},
                 binary=binary)
             doc.write(tmp / name, encoding="utf-8", xml_declaration=True)
