@@ -1,4 +1,4 @@
-"""drumheat.mechanics: soft-sphere DEM on jax-md neighbour lists.
+"""drumheat.mechanics: soft-sphere DEM on cell-list neighbour lists (jax-md's layout).
 
 Contact laws (:mod:`.contact_forces`), neighbour lists with tangential history
 (:mod:`.neighbors`), velocity-Verlet integration with a checked chunked runner

@@ -59,7 +59,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax_md import partition
 
 from drumheat.geometry.walls import expand_walls, rpm_to_omega, wall_bounds
 from drumheat.mechanics.contact_forces import (
@@ -78,7 +77,7 @@ from drumheat.mechanics.errors import (
     OverlapError,
     ParticleEscapeError,
 )
-from drumheat.mechanics.neighbors import NeighborSetup, make_neighbor_setup, remap_pair_data
+from drumheat.mechanics.neighbors import PEC, NeighborSetup, make_neighbor_setup, remap_pair_data
 
 __all__ = [
     "DEMAccuracyWarning",
@@ -137,8 +136,9 @@ class DEMState(NamedTuple):
 
     position (N, dim) m; velocity (N, dim) m/s; angular_velocity (N,) in 2D (z component) or
     (N, 3) rad/s; force (N, dim) N and torque (N,) / (N, 3) N m at the current positions;
-    time (s, float64); step (int); nbrs: jax-md OrderedSparse neighbour list; pair_spring
-    (capacity, dim) m: tangential spring per neighbour pair (aligned with ``nbrs.idx``);
+    time (s, float64); step (int); nbrs: the OrderedSparse neighbour list
+    (:class:`~drumheat.mechanics.neighbors.NeighborList`); pair_spring (capacity, dim) m:
+    tangential spring per neighbour pair (aligned with ``nbrs.idx``);
     wall_spring (N, W, dim) m: tangential spring per particle x wall primitive; n_rebuilds:
     neighbour rebuilds so far; max_overlap: largest overlap / smaller radius seen since the
     last check; extra: user state advanced by ``extra_update`` (e.g. temperatures).
@@ -447,8 +447,8 @@ class DEM:
         attempt)."""
         code = int(new.nbrs.error.code)
         cap = start.nbrs.idx.shape[1]
-        grow_pairs = bool(code & partition.PEC.NEIGHBOR_LIST_OVERFLOW)
-        grow_cells = bool(code & partition.PEC.CELL_LIST_OVERFLOW)
+        grow_pairs = bool(code & PEC.NEIGHBOR_LIST_OVERFLOW)
+        grow_cells = bool(code & PEC.CELL_LIST_OVERFLOW)
         cell_cap = start.nbrs.cell_list_capacity or 0
         need = cap
         if grow_pairs:
@@ -665,7 +665,7 @@ def make_dem(
                                    capacity_multiplier)
     # cell-list capacity floor: twice the particles of the smallest size that a cell of side
     # `cutoff` holds at the densest packing (hexagonal 0.907 in 2D, fcc 0.74 in 3D), plus one;
-    # jax-md's own estimate from a dilute start (a poured grid) would overflow at once
+    # an estimate from a dilute start (a poured grid) would overflow at once
     if dim == 2:
         per_cell = 0.907 * cutoff**2 / (math.pi * r_min**2)
     else:

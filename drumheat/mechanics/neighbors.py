@@ -1,5 +1,6 @@
 """Neighbour lists for DEM: a cell list with a Verlet skin, built in constant memory per
-particle, stored in ``jax_md.partition``'s ``NeighborList`` (OrderedSparse format).
+particle, in jax-md's OrderedSparse layout (:class:`NeighborList`: the fields and overflow
+codes of ``jax_md.partition.NeighborList``, so code written for jax-md's lists reads ours).
 
 * Format: ``OrderedSparse``: ``idx`` has shape (2, capacity); column k is the pair
   ``(i, j) = (idx[0, k], idx[1, k])`` with ``i < j``, each pair once; padding is ``N``.
@@ -21,7 +22,11 @@ particle, stored in ``jax_md.partition``'s ``NeighborList`` (OrderedSparse forma
   contact unseen.
 * Overflow: a build flags ``NEIGHBOR_LIST_OVERFLOW`` (more pairs than the buffer holds) or
   ``CELL_LIST_OVERFLOW`` (a cell holds more particles than the cell capacity) in the list's
-  ``error`` (jax-md's codes); the integrator then reallocates and redoes the chunk.
+  ``error`` (:class:`PEC`, jax-md's bits); the integrator then reallocates and redoes the chunk.
+* Why not jax-md's own build: it gathers all candidates at once (about 10 kB per particle in
+  3D, measured in docs/performance.md), and importing ``jax_md`` runs compiled code at import
+  time (7-8 s of every drumheat start on the development machine). jax-md stays the reference
+  the tests compare with.
 * Pair order: after every build the pairs are sorted by ``(i, j)`` (:func:`sort_pairs`), so
   force sums do not depend on when the list was built.
 * History across rebuilds: after a rebuild, :func:`remap_pair_data` finds every new pair in the
@@ -38,9 +43,10 @@ from typing import Callable, Optional
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax_md import partition
-
 __all__ = [
+    "NeighborList",
+    "ListError",
+    "PEC",
     "CellGrid",
     "make_displacement",
     "NeighborSetup",
@@ -128,8 +134,56 @@ def sort_pairs(nbrs, n):
     return dataclasses.replace(nbrs, idx=jnp.stack([nbrs.idx[0][order], nbrs.idx[1][order]]))
 
 
-_CELL_OVERFLOW = int(partition.PEC.CELL_LIST_OVERFLOW)
-_PAIR_OVERFLOW = int(partition.PEC.NEIGHBOR_LIST_OVERFLOW)
+class PEC:
+    """Overflow bits of :attr:`NeighborList.error` (the bits of ``jax_md.partition.PEC``)."""
+
+    NEIGHBOR_LIST_OVERFLOW = 1 << 0  #: more pairs than the pair buffer holds
+    CELL_LIST_OVERFLOW = 1 << 1  #: a cell holds more particles than the cell capacity
+
+
+@partial(jax.tree_util.register_dataclass, data_fields=["code"], meta_fields=[])
+@dataclass(frozen=True)
+class ListError:
+    """Overflow flags of a neighbour list: ``code`` (uint8 array) of :class:`PEC` bits."""
+
+    code: jax.Array
+
+    def update(self, bit: int, pred) -> "ListError":
+        """The flags with ``bit`` set where ``pred`` holds (flags only accumulate)."""
+        return ListError(jnp.where(pred, self.code | jnp.uint8(bit), self.code))
+
+
+@partial(jax.tree_util.register_dataclass,
+         data_fields=["idx", "reference_position", "error"],
+         meta_fields=["cell_list_capacity", "max_occupancy", "cell_size"])
+@dataclass(frozen=True)
+class NeighborList:
+    """A neighbour list (OrderedSparse: see the module docstring).
+
+    Attributes:
+      idx: (2, capacity) int32 pairs ``(i, j)``, ``i < j``, padded with N.
+      reference_position: box-frame positions at the last build (the skin criterion).
+      error: :class:`ListError`, overflows since the last allocation.
+      cell_list_capacity: particles one cell may hold (static).
+      max_occupancy: pair capacity, ``idx.shape[1]`` (static).
+      cell_size: the cutoff the cells are built for, m (static).
+    """
+
+    idx: jax.Array
+    reference_position: jax.Array
+    error: ListError
+    cell_list_capacity: int
+    max_occupancy: int
+    cell_size: float
+
+    @property
+    def did_buffer_overflow(self):
+        """Whether the pair buffer or a cell overflowed since the last allocation."""
+        return self.error.code & (PEC.NEIGHBOR_LIST_OVERFLOW | PEC.CELL_LIST_OVERFLOW)
+
+
+_CELL_OVERFLOW = PEC.CELL_LIST_OVERFLOW
+_PAIR_OVERFLOW = PEC.NEIGHBOR_LIST_OVERFLOW
 
 
 @dataclass(frozen=True)
@@ -278,9 +332,7 @@ class NeighborSetup:
         return position - jnp.asarray(self.lo, dtype=position.dtype)
 
     def _list(self, pos, idx, error, cell_capacity, capacity):
-        return partition.NeighborList(idx, pos, error, int(cell_capacity), int(capacity),
-                                      partition.NeighborListFormat.OrderedSparse,
-                                      self.cutoff, None, None)
+        return NeighborList(idx, pos, error, int(cell_capacity), int(capacity), self.cutoff)
 
     def allocate(self, position, min_capacity: int = 0, min_cell_capacity: int = 0):
         """Allocate a neighbour list at ``position`` (not jittable: it sizes the buffers).
@@ -298,7 +350,7 @@ class NeighborSetup:
         idx, total, fullest = _build(self.grid, pos, target, cell_cap)
         code = (_PAIR_OVERFLOW if int(total) > target else 0) | \
             (_CELL_OVERFLOW if int(fullest) > cell_cap else 0)
-        error = partition.PartitionError(jnp.asarray(code, jnp.uint8))
+        error = ListError(jnp.asarray(code, jnp.uint8))
         return sort_pairs(self._list(pos, idx, error, cell_cap, target), n)
 
     def count_pairs(self, position):
@@ -312,8 +364,8 @@ class NeighborSetup:
         pos = self.to_box(position)
         cap = nbrs.idx.shape[1]
         idx, total, fullest = self.grid.build(pos, cap, nbrs.cell_list_capacity)
-        error = nbrs.error.update(partition.PEC.NEIGHBOR_LIST_OVERFLOW, total > cap)
-        error = error.update(partition.PEC.CELL_LIST_OVERFLOW, fullest > nbrs.cell_list_capacity)
+        error = nbrs.error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > cap)
+        error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > nbrs.cell_list_capacity)
         new = self._list(pos, idx, error, nbrs.cell_list_capacity, nbrs.max_occupancy)
         return sort_pairs(new, position.shape[0])
 

@@ -1,6 +1,6 @@
 """Motion model ``dem``: soft-sphere DEM in a rotating drum with heat transfer in the same scan.
 
-The mechanics come from :mod:`drumheat.mechanics` (jax-md neighbour lists, spring-dashpot
+The mechanics come from :mod:`drumheat.mechanics` (cell-list neighbour lists, spring-dashpot
 contacts with tangential history, rotation, rotating drum shell); the heat model is the same
 composed :class:`~drumheat.thermal.model.ThermalModel` as for resting beds. Every
 ``[dem] thermal_substeps`` mechanical steps the particle temperatures take one explicit step
@@ -432,18 +432,18 @@ class DEMBed(DEMMotion):
         starts = unstack(start)
         if np.any(d["overflow"][:n]):
             code = int(np.bitwise_or.reduce(np.asarray(to_host(end.nbrs.error.code))[:n]))
-            from jax_md import partition
+            from drumheat.mechanics.neighbors import PEC
 
             cap = int(starts[0].nbrs.idx.shape[1])
             need = cap
-            if code & partition.PEC.NEIGHBOR_LIST_OVERFLOW:
+            if code & PEC.NEIGHBOR_LIST_OVERFLOW:
                 need = 2 * cap
                 for st in unstack(end):
                     if bool(jnp.all(jnp.isfinite(st.position))):
                         est = dem.neighbor.count_pairs(st.position)
                         need = max(need, int(est * dem.neighbor.capacity_multiplier) + 1)
             cc = int(starts[0].nbrs.cell_list_capacity or 0)
-            if code & partition.PEC.CELL_LIST_OVERFLOW:
+            if code & PEC.CELL_LIST_OVERFLOW:
                 cc += max(1, cc // 2) * (attempt + 1)
             return stack(_common_neighbors(dem, starts, need, cc, realloc=True))
         for v, (s, e) in enumerate(zip(starts, unstack(end))):
@@ -461,8 +461,6 @@ def _values(tree) -> tuple:
 
 def _common_neighbors(dem, states, cap: int, cell_cap: int, realloc: bool = False):
     """Neighbour lists of all states with one pair capacity and one cell-list capacity."""
-    import dataclasses
-
     while True:
         new = []
         for st in states:
@@ -476,11 +474,7 @@ def _common_neighbors(dem, states, cap: int, cell_cap: int, realloc: bool = Fals
         caps = {int(s.nbrs.idx.shape[1]) for s in new}
         ccs = {int(s.nbrs.cell_list_capacity or 0) for s in new}
         if len(caps) == 1 and len(ccs) == 1:
-            # jax-md makes new (equivalent: same box, cell size and cutoff) cell-list and
-            # neighbour functions for every allocation and every DEM system; one shared pair
-            # of functions makes the lists stackable
-            fns = dict(cell_list_fn=new[0].nbrs.cell_list_fn, update_fn=new[0].nbrs.update_fn)
-            return [s._replace(nbrs=dataclasses.replace(s.nbrs, **fns)) for s in new]
+            return new
         cap, cell_cap = max(caps), max(ccs)
         states, realloc = new, True
 

@@ -24,7 +24,7 @@ __all__ = ["DEMMotion", "WARMUP_STEPS"]
 #: mechanical steps of the timed warm-up behind a run's cost estimate
 WARMUP_STEPS = 200
 
-#: the static fields of a jax-md neighbour list that a checkpoint keeps
+#: the static fields of a neighbour list that a checkpoint keeps
 _NEIGHBOR_STATICS = ("cell_list_capacity", "max_occupancy", "cell_size")
 
 
