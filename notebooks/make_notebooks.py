@@ -128,7 +128,13 @@ NOTEBOOKS = {
             "print(gif, '%.1f MB' % (gif.stat().st_size / 1e6))\n"
             "from IPython.display import Image\n"
             "Image(filename=str(gif))"),
-        new_markdown_cell("One frame as a figure of its own (here the output at t = 60 s):"),
+        new_markdown_cell(
+            "One frame as a figure of its own (here the output at t = 60 s). After "
+            "`dem.replay_after` the particles move through the recorded revolution again, so "
+            "the positions at 60 s are those of the first revolution, when the two fractions "
+            "were still in their halves (the figure's title says so); the temperatures are "
+            "those at 60 s. The mixing itself shows in the first 5 s of the animation and in "
+            "the contact counts above."),
         new_code_cell(
             "k = int(abs(mixed.t - 60.0).argmin())\n"
             "fig = plot.plot_snapshot(mixed, index=k)"),
@@ -191,15 +197,17 @@ NOTEBOOKS = {
             "The centre is still at its initial 1350 °C when the droplet reaches the bed, while "
             "the surface cooled by more than 100 K in flight and far more in wall contact: this "
             "is what Bi ~ 1 means, and why a lumped particle would be wrong here.\n\n"
-            "## Radiation switched off\n\nAn override changes values, it cannot remove a "
-            "table; to switch an effect off, drop its table from the scene dict and validate "
-            "again:"),
+            "## Radiation switched off\n\nA scene is edited in Python like a record: "
+            "`scene.replace({...})` changes values by their dotted keys, `scene.without(...)` "
+            "switches an effect off by dropping its table, and both check the new scene as "
+            "the TOML loader would (a misspelt key raises a `SceneError` naming it); "
+            "`scene.save('mine.toml')` writes it for the command line (docs: *Build a scene "
+            "in Python*)."),
         new_code_cell(
-            "from drumheat.scene import scene_from_dict\n"
-            "\n"
-            "raw = dh.load_scene('staltner-slag-particle').to_dict()\n"
-            "del raw['heat']['radiation']\n"
-            "no_rad = dh.run(scene_from_dict(raw), progress=False)\n"
+            "scene = dh.load_scene('staltner-slag-particle')\n"
+            "no_rad_scene = scene.without('heat.radiation')\n"
+            "print(scene.heat.radiation is not None, no_rad_scene.heat.radiation)\n"
+            "no_rad = dh.run(no_rad_scene, progress=False)\n"
             "\n"
             "table = pd.DataFrame({\n"
             "    'with radiation': slag.timeseries.iloc[-1][['T_mean', 'T_surface', 'T_centre']],\n"

@@ -497,6 +497,74 @@ class DEM:
         return {k: float(v) for k, v in self._energies(state).items()}
 
 
+def _checked_time_step(mass, params, walls, dim, dt, safety_factor, rotation):
+    """``(dt, t_crit, m_min, k_max)``: the DEM time step, by default ``safety_factor x t_crit``
+    (Weigler digest [2.1]); one above ``t_crit`` is refused, one above
+    :data:`FLOW_SAFETY_FACTOR` ``x t_crit`` in a turning 3D drum with friction warned about."""
+    m_min = float(np.min(mass))
+    k_max = params.k_max()
+    t_crit = critical_time_step(m_min, k_max)
+    dt = float(safety_factor * t_crit if dt is None else dt)
+    if not dt > 0:
+        raise ValueError(f"time step must be positive, got dt = {dt}")
+    if dt > t_crit:
+        raise ValueError(
+            f"time step dt = {dt:.4g} s exceeds the critical time step t_crit = 2 sqrt(m_min/k_n)"
+            f" = {t_crit:.4g} s (m_min = {m_min:.4g} kg, k_n = {k_max:.4g} N/m; Weigler digest "
+            f"[2.1]). Use dt <= {safety_factor * t_crit:.4g} s (safety factor "
+            f"{safety_factor}), or soften the contacts (k_n ~ 1/dt^2).")
+    rotating = any(float(np.max(np.abs(np.asarray(getattr(w, "rpm", 0.0))))) > 0 for w in walls)
+    frictional = float(max(np.max(np.asarray(params.mu_pp)), np.max(np.asarray(params.mu_pw)))) > 0
+    # measured in 3D only (the 2D monolayer drums have not been checked for this yet)
+    if dim == 3 and rotation and rotating and frictional and dt > FLOW_SAFETY_FACTOR * t_crit * (1 + 1e-9):
+        warnings.warn(
+            f"dt = {dt:.4g} s = {dt / t_crit:.3g} t_crit in a rotating drum: above "
+            f"{FLOW_SAFETY_FACTOR} t_crit the frictional contacts slide where they should stick "
+            "(3D glass drum slice: angle of repose 17-19 deg and the wall layer at half the drum "
+            "speed at 0.2 t_crit, 29-32 deg at 0.1 and 0.05 t_crit, LIGGGHTS 29 deg). Use "
+            f"safety_factor <= {FLOW_SAFETY_FACTOR} for drum flow.", DEMAccuracyWarning,
+            stacklevel=3)
+    return dt, t_crit, m_min, k_max
+
+
+def _neighbour_domain(walls, dim, radius, skin, gap_cut, bounds, periodic_length,
+                      capacity_multiplier):
+    """``(neighbour setup, cell-capacity floor, escape box lo, hi)`` of a DEM domain.
+
+    The neighbour cutoff is ``2 r_max + skin`` plus the conduction gap (pairs that conduct
+    across a gap must be listed); the search box is the walls' bounding box (or ``bounds``)
+    with a margin of two cutoffs; particles count as escaped one radius outside the domain.
+    """
+    r_max, r_min = float(np.max(radius)), float(np.min(radius))
+    cutoff = 2.0 * r_max + skin + gap_cut * 2.0 * r_max
+    if bounds is None:
+        lo, hi = wall_bounds(walls, dim)
+    else:
+        lo, hi = (np.asarray(b, dtype=float).copy() for b in bounds)
+    if periodic_length is not None:
+        if dim != 3:
+            raise ValueError("periodic_length requires dim = 3")
+        lo[-1], hi[-1] = 0.0, float(periodic_length)
+        if periodic_length < 2.0 * cutoff:
+            raise ValueError(f"periodic length {periodic_length} m must be at least twice the "
+                             f"neighbour cutoff {cutoff:.4g} m")
+    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
+        raise ValueError(f"the walls do not bound the domain in every direction (lo={lo}, "
+                         f"hi={hi}); pass bounds=(lo, hi) or periodic_length")
+    margin = 2.0 * cutoff
+    neighbor = make_neighbor_setup(dim, lo - margin, hi + margin, cutoff, skin, periodic_length,
+                                   capacity_multiplier)
+    # cell-list capacity floor: twice the particles of the smallest size that a cell of side
+    # `cutoff` holds at the densest packing (hexagonal 0.907 in 2D, fcc 0.74 in 3D), plus one;
+    # an estimate from a dilute start (a poured grid) would overflow at once
+    if dim == 2:
+        per_cell = 0.907 * cutoff**2 / (math.pi * r_min**2)
+    else:
+        per_cell = 0.74 * cutoff**3 / (4.0 / 3.0 * math.pi * r_min**3)
+    cell_cap = int(math.ceil(2.0 * per_cell)) + 1
+    return neighbor, cell_cap, lo - r_max, hi + r_max
+
+
 def make_dem(
     particles: Particles,
     walls,
@@ -605,31 +673,8 @@ def make_dem(
     if int(np.max(np.asarray(particles.ptype))) >= params.n_types:
         raise ValueError(f"particle type {int(np.max(np.asarray(particles.ptype)))} has no row "
                          f"in the contact tables ({params.n_types} types)")
-    m_min = float(np.min(mass_np))
-    k_max = params.k_max()
-    t_crit = critical_time_step(m_min, k_max)
-    if dt is None:
-        dt = safety_factor * t_crit
-    dt = float(dt)
-    if not dt > 0:
-        raise ValueError(f"time step must be positive, got dt = {dt}")
-    if dt > t_crit:
-        raise ValueError(
-            f"time step dt = {dt:.4g} s exceeds the critical time step t_crit = 2 sqrt(m_min/k_n)"
-            f" = {t_crit:.4g} s (m_min = {m_min:.4g} kg, k_n = {k_max:.4g} N/m; Weigler digest "
-            f"[2.1]). Use dt <= {safety_factor * t_crit:.4g} s (safety factor "
-            f"{safety_factor}), or soften the contacts (k_n ~ 1/dt^2).")
-    rotating = any(float(np.max(np.abs(np.asarray(getattr(w, "rpm", 0.0))))) > 0 for w in walls)
-    frictional = float(max(np.max(np.asarray(params.mu_pp)), np.max(np.asarray(params.mu_pw)))) > 0
-    # measured in 3D only (the 2D monolayer drums have not been checked for this yet)
-    if dim == 3 and rotation and rotating and frictional and dt > FLOW_SAFETY_FACTOR * t_crit * (1 + 1e-9):
-        warnings.warn(
-            f"dt = {dt:.4g} s = {dt / t_crit:.3g} t_crit in a rotating drum: above "
-            f"{FLOW_SAFETY_FACTOR} t_crit the frictional contacts slide where they should stick "
-            "(3D glass drum slice: angle of repose 17-19 deg and the wall layer at half the drum "
-            "speed at 0.2 t_crit, 29-32 deg at 0.1 and 0.05 t_crit, LIGGGHTS 29 deg). Use "
-            f"safety_factor <= {FLOW_SAFETY_FACTOR} for drum flow.", DEMAccuracyWarning,
-            stacklevel=2)
+    dt, t_crit, m_min, k_max = _checked_time_step(mass_np, params, walls, dim, dt, safety_factor,
+                                                  rotation)
     if gravity is None:
         gravity = np.zeros(dim)
         gravity[1] = -9.81
@@ -638,42 +683,11 @@ def make_dem(
         raise ValueError(f"gravity must have shape ({dim},), got {gravity.shape}")
 
     r_max = float(np.max(radius_np))
-    r_min = float(np.min(radius_np))
     skin = 0.5 * r_max if skin is None else float(skin)
-    cutoff = 2.0 * r_max + skin
     # pairs that conduct across a gap must be in the neighbour list
     gap_cut = max(gap_pp, conduction.gap_tolerance if conduction is not None else 0.0)
-    cutoff += gap_cut * 2.0 * r_max
-    if bounds is None:
-        lo, hi = wall_bounds(walls, dim)
-    else:
-        lo, hi = (np.asarray(b, dtype=float).copy() for b in bounds)
-    if periodic_length is not None:
-        if dim != 3:
-            raise ValueError("periodic_length requires dim = 3")
-        lo[-1], hi[-1] = 0.0, float(periodic_length)
-        if periodic_length < 2.0 * cutoff:
-            raise ValueError(f"periodic length {periodic_length} m must be at least twice the "
-                             f"neighbour cutoff {cutoff:.4g} m")
-    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
-        raise ValueError(f"the walls do not bound the domain in every direction (lo={lo}, "
-                         f"hi={hi}); pass bounds=(lo, hi) or periodic_length")
-    margin = 2.0 * cutoff
-    nb_lo = lo - margin
-    nb_hi = hi + margin
-    neighbor = make_neighbor_setup(dim, nb_lo, nb_hi, cutoff, skin, periodic_length,
-                                   capacity_multiplier)
-    # cell-list capacity floor: twice the particles of the smallest size that a cell of side
-    # `cutoff` holds at the densest packing (hexagonal 0.907 in 2D, fcc 0.74 in 3D), plus one;
-    # an estimate from a dilute start (a poured grid) would overflow at once
-    if dim == 2:
-        per_cell = 0.907 * cutoff**2 / (math.pi * r_min**2)
-    else:
-        per_cell = 0.74 * cutoff**3 / (4.0 / 3.0 * math.pi * r_min**3)
-    cell_cap = int(math.ceil(2.0 * per_cell)) + 1
-    # escape region: the domain plus one radius of tolerance
-    dom_lo = lo - r_max
-    dom_hi = hi + r_max
+    neighbor, cell_cap, dom_lo, dom_hi = _neighbour_domain(
+        walls, dim, radius_np, skin, gap_cut, bounds, periodic_length, capacity_multiplier)
     periodic_axis = dim - 1 if periodic_length is not None else None
 
     dtype = jnp.dtype(dtype)

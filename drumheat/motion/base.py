@@ -124,6 +124,12 @@ class AbstractMotion(abc.ABC):
         made (runs without mechanics are short)."""
         return None
 
+    def progress_work(self, t0: float, t1: float) -> float:
+        """The share of the run's cost in advancing from ``t0`` to ``t1``, in any unit: the
+        progress bar's ETA assumes the run advances at a constant rate in it. Default: the
+        simulated time (every second of process time costs alike)."""
+        return t1 - t0
+
     # -- checkpoints ------------------------------------------------------------------------
     def checkpoint_meta(self, state) -> dict:
         """JSON-serialisable facts of ``state`` that are not array leaves but are needed to

@@ -387,6 +387,9 @@ class DEMBed(DEMMotion):
     def mechanical_steps(self) -> int:
         return self.n_coupled * self.steps_per_output
 
+    def coupled_until(self) -> float:
+        return float(self.t_out[self.n_coupled])
+
     # -- ensembles ------------------------------------------------------------------------------
     def not_vmappable(self) -> str | None:
         if self.scene.dem.record_interval is not None or self.scene.dem.replay_after is not None:

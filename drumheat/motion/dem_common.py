@@ -124,7 +124,24 @@ class DEMMotion(AbstractMotion):
     # -- cost ---------------------------------------------------------------------------------
     def mechanical_steps(self) -> int:
         """Mechanical steps of the whole run (the chunks that run the DEM)."""
-        return int(round((self.times[-1] - self.times[0]) / self.dt))
+        return int(round((self.coupled_until() - self.times[0]) / self.dt))
+
+    def coupled_until(self) -> float:
+        """Time (s) up to which the DEM itself runs (a replay follows where the scene asks)."""
+        return float(self.times[-1])
+
+    def progress_work(self, t0: float, t1: float) -> float:
+        """Estimated seconds from ``t0`` to ``t1``, by the model of :meth:`cost` (mechanical
+        steps times the warm-up's time per step, plus the host work of the chunk), so that the
+        ETA of a run whose replay follows the DEM is not that of a DEM run throughout. Before
+        :meth:`cost` ran: the mechanical steps, one per replayed chunk."""
+        tc = self.coupled_until()
+        steps = max(0.0, min(t1, tc) - min(t0, tc)) / self.dt
+        model = getattr(self, "_cost_model", None)
+        if model is None:
+            return steps if steps > 0 else 1.0
+        per_step, per_chunk = model
+        return steps * per_step + per_chunk
 
     def thermal_steps(self) -> int:
         """Thermal steps of the whole run."""
@@ -144,6 +161,7 @@ class DEMMotion(AbstractMotion):
         jax.device_get(self.observe(end))
         self.dem._diag(end)
         per_chunk = time.perf_counter() - t0
+        self._cost_model = (per_step, per_chunk)
         chunks = len(self.times) - 1
         return dict(mechanical_steps=n, thermal_steps=self.thermal_steps(), dt=self.dt,
                     chunks=chunks, seconds=n * per_step + chunks * per_chunk,

@@ -140,14 +140,14 @@ def animate(result_dir, out=None, fps: float = 10, fmt: str | None = None, dpi: 
     def draw(k):
         nonlocal coll
         i = int(idx[k])
+        pos, d, T_C, note = plot.cross_section(frames, i)
         if three_d:  # the mid-depth slice: which particles it cuts changes from frame to frame
-            pos, d, T_C, note = plot.cross_section(frames, i)
             coll.remove()
             coll = plot.draw_particles(ax, pos, d, T_C, vmin=vmin, vmax=vmax)
-            title.set_text(f"{frames.name}\n{note}")
         else:
-            coll.set_offsets(frames.position[i][:, :2])
-            coll.set_array(frames.T[i] - plot.C0)
+            coll.set_offsets(pos)
+            coll.set_array(T_C)
+        title.set_text(f"{frames.name}\n{note}" if note else frames.name)
         clock.set_text(plot.format_clock(float(frames.t[i])))
 
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -647,17 +647,31 @@ def cross_section(frames: ParticleFrames, index: int):
     """The particles a cross-section figure draws at output ``index``: ``(xy (M, 2) m,
     diameter (M,) m, temperature (M,) degC, note)``. In 2D all particles (note ""); in 3D the
     slice through the middle of the drum's depth, the particles whose centres lie within half
-    a diameter of the mid-plane (those the plane cuts), with a note saying how many."""
+    a diameter of the mid-plane (those the plane cuts), with a note saying how many. After
+    ``dem.replay_after`` the note says that the positions are those of the replayed recording
+    (the bed then moves through the recorded cycle again; the temperatures are the frame's)."""
     pos, d = np.asarray(frames.position[index]), np.asarray(frames.diameter)
     T_C = np.asarray(frames.T[index]) - C0
+    replay = _replay_note(frames, float(frames.t[index]))
     if pos.shape[1] != 3:
-        return pos, d, T_C, ""
+        return pos, d, T_C, replay
     z = pos[:, 2]
     depth = getattr(getattr(frames.scene, "drum", None), "depth", None)
     z_mid = 0.5 * depth if depth else 0.5 * (z.min() + z.max())
     cut = np.abs(z - z_mid) <= 0.5 * d
-    return (pos[cut][:, :2], d[cut], T_C[cut],
-            f"slice at mid-depth: {int(np.sum(cut))} of {len(cut)} particles")
+    note = f"slice at mid-depth: {int(np.sum(cut))} of {len(cut)} particles"
+    return pos[cut][:, :2], d[cut], T_C[cut], note + (f"; {replay}" if replay else "")
+
+
+def _replay_note(frames: ParticleFrames, t: float) -> str:
+    """What a frame's positions are after ``dem.replay_after``: those of the replayed cycle of
+    the recording (the temperatures are the frame's own), or "" before it / without replay."""
+    dem = getattr(frames.scene, "dem", None)
+    after = getattr(dem, "replay_after", None)
+    if after is None or t <= after + 1e-9:
+        return ""
+    cycle = dem.replay_cycle if dem.replay_cycle is not None else 0.5 * after
+    return f"positions replayed from {after - cycle:.3g}-{after:.3g} s"
 
 
 def plot_snapshot(result, index=-1, ax=None, vmin=None, vmax=None, walls=None, colorbar=True):

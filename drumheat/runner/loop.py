@@ -102,7 +102,7 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
     times = motion.times
     if monitor is not None:
         monitor.begin(motion, times[is_output], rows)
-    with SimProgress(float(times[-1] - times[0]), progress) as bar:
+    with SimProgress(float(times[-1] - times[0]), progress, work=_work(motion, times)) as bar:
         bar.update_to(float(times[i0] - times[0]))
         for i in range(i0, len(times) - 1):
             t0, t1 = float(times[i]), float(times[i + 1])
@@ -137,6 +137,16 @@ def restore(motion: AbstractMotion, checkpoint: dict, params=None):
     state, log = motion.restore_state(template, checkpoint["state"],
                                       checkpoint["meta"]["state"], log)
     return state, log, checkpoint["rows"], int(checkpoint["meta"]["chunk"])
+
+
+def _work(motion: AbstractMotion, times):
+    """Cumulative cost of reaching each simulated time (s from the start), interpolated
+    between the chunk boundaries (:meth:`AbstractMotion.progress_work`)."""
+    times = np.asarray(times, float)
+    w = np.concatenate([[0.0], np.cumsum([motion.progress_work(float(a), float(b))
+                                          for a, b in zip(times[:-1], times[1:])])])
+    rel = times - times[0]
+    return lambda t: float(np.interp(t, rel, w))
 
 
 class LongRunError(ValueError):
