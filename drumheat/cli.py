@@ -105,6 +105,16 @@ def _cmd_export_vtk(args) -> int:
     return 0
 
 
+def _scene_command(sub, name: str, func, help: str):
+    """A subcommand that takes a scene (built-in name or file) and ``--set`` overrides."""
+    c = sub.add_parser(name, help=help)
+    c.add_argument("scene", help="built-in scene name or path to a .toml scene file")
+    c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene value by its dotted key (repeatable)")
+    c.set_defaults(func=func)
+    return c
+
+
 def build_parser() -> argparse.ArgumentParser:
     from drumheat._version import __version__
 
@@ -143,18 +153,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(repeatable); checked before the file is written")
     n.add_argument("--force", action="store_true", help="overwrite an existing file")
     n.set_defaults(func=_cmd_new)
-    m = sub.add_parser("estimate", help="what a run will cost before it starts: steps and "
-                                        "estimated wall time (packs the bed, times a warm-up)")
-    m.add_argument("scene", help="built-in scene name or path to a .toml scene file")
-    m.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scene value by its dotted key (repeatable)")
-    m.set_defaults(func=_cmd_estimate)
-    e = sub.add_parser("explain", help="size of each heat-transfer effect in a scene, and which "
-                                       "to drop or add")
-    e.add_argument("scene", help="built-in scene name or path to a .toml scene file")
-    e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scene value by its dotted key (repeatable)")
-    e.set_defaults(func=_cmd_explain)
+    _scene_command(sub, "estimate", _cmd_estimate, "what a run will cost before it starts: "
+                   "steps and estimated wall time (packs the bed, times a warm-up)")
+    _scene_command(sub, "explain", _cmd_explain, "size of each heat-transfer effect in a scene, "
+                   "and which to drop or add")
     a = sub.add_parser("animate", help="animate a result folder: the drum coloured by "
                                        "temperature, with a clock (GIF or MP4)")
     a.add_argument("result_dir", metavar="RESULT_DIR",

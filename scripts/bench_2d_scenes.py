@@ -20,15 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-
-def cpu_ticks():
-    with open("/proc/stat") as f:
-        return [int(x) for x in f.readline().split()[1:]]
-
-
-def steal_percent(a, b) -> float:
-    d = [y - x for x, y in zip(a, b)]
-    return 100.0 * d[7] / max(1, sum(d))
+from machine import cpu_ticks, load, steal_percent  # scripts/machine.py
 
 
 def main():
@@ -47,8 +39,7 @@ def main():
                 if args.duration:
                     cmd += ["--set", f"run.duration={args.duration}", "--set",
                             f"run.output_interval={args.duration / 4}"]
-                with open("/proc/loadavg") as f:
-                    load = float(f.read().split()[0])
+                ld = load()
                 c0, t0 = cpu_ticks(), time.perf_counter()
                 p = subprocess.run(cmd, capture_output=True, text=True)
                 wall = time.perf_counter() - t0
@@ -58,7 +49,7 @@ def main():
                     continue
                 s = json.loads((out / "summary.json").read_text())
                 rows.append((scene, backend, s.get("contact_backend", "?"), s["n_particles"],
-                             s["wall_time_s"], wall, load, steal))
+                             s["wall_time_s"], wall, ld, steal))
                 print(f"{scene} {backend}: run {s['wall_time_s']:.1f} s, process {wall:.1f} s",
                       flush=True)
     print("\n" + (f"{args.duration:g} s simulated per run" if args.duration

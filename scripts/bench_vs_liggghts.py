@@ -62,6 +62,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import drumheat  # noqa: F401  (x64 for the temperatures)
+from machine import cpu_ticks, load, steal_percent  # noqa: E402  (scripts/machine.py)
 from drumheat.geometry import DrumShell
 from drumheat.mechanics import contact_params, cpu_kernel, make_dem, make_particles
 from drumheat.mechanics.conduction import PairConduction
@@ -85,31 +86,6 @@ def mpirun(np_):
     if os.geteuid() == 0:
         cmd.append("--allow-run-as-root")
     return cmd + ["-np", str(np_), "liggghts", "-echo", "none", "-nocite"]
-
-
-def load():
-    return os.getloadavg()[0]
-
-
-def cpu_ticks():
-    """(steal, total) CPU ticks of the machine from /proc/stat (None off Linux)."""
-    try:
-        f = [int(v) for v in Path("/proc/stat").read_text().split("\n")[0].split()[1:]]
-    except (OSError, ValueError):
-        return None
-    return f[7], sum(f)
-
-
-def steal_percent(t0, t1):
-    """Share of CPU time the hypervisor gave to other guests between two cpu_ticks(), %.
-
-    On a shared virtual machine this, not the load average, tells a slow timing: on the
-    development machine the same setting ran up to 2x slower in runs with much steal than in
-    runs with almost none.
-    """
-    if t0 is None or t1 is None or t1[1] == t0[1]:
-        return float("nan")
-    return 100.0 * (t1[0] - t0[0]) / (t1[1] - t0[1])
 
 
 def run_liggghts(args, cwd, log, np_=1, timeout=None):

@@ -660,7 +660,7 @@ def cross_section(frames: ParticleFrames, index: int):
     z_mid = 0.5 * depth if depth else 0.5 * (z.min() + z.max())
     cut = np.abs(z - z_mid) <= 0.5 * d
     note = f"slice at mid-depth: {int(np.sum(cut))} of {len(cut)} particles"
-    return pos[cut][:, :2], d[cut], T_C[cut], note + (f"; {replay}" if replay else "")
+    return pos[cut][:, :2], d[cut], T_C[cut], note + (f"\n{replay}" if replay else "")
 
 
 def _replay_note(frames: ParticleFrames, t: float) -> str:
@@ -922,7 +922,7 @@ def save_figures(result, folder, formats=("png",), dpi: int = 120) -> list[Path]
         figs["snapshot_final"] = plot_snapshot(result, -1)  # 3D: the mid-depth slice
     for name, fig in figs.items():
         for fmt in formats:
-            fig.savefig(folder / f"{name}.{fmt}", dpi=dpi)
+            fig.savefig(folder / f"{name}.{fmt}", dpi=dpi, bbox_inches="tight")  # long titles
             out.append(folder / f"{name}.{fmt}")
         plt.close(fig)
     return out
