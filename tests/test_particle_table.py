@@ -58,6 +58,15 @@ def test_read_from_the_result_folder(result, tmp_path):
                                from_memory[["t", "T", "x", "y"]].to_numpy())
     np.testing.assert_allclose(from_folder.heat_rate.to_numpy(),
                                from_memory.heat_rate.to_numpy(), equal_nan=True)
+    # the ParaView files carry the same heat flows
+    from drumheat.results.vtk import export_vtk
+
+    pvd = export_vtk(out, binary=False)
+    last = sorted(pvd.parent.glob("particles_*.vtp"))[-1].read_text()
+    assert 'Name="heat_rate"' in last
+    block = last.split('Name="heat_rate"')[1].split(">", 1)[1].split("<", 1)[0]
+    np.testing.assert_allclose(np.array(block.split(), float),
+                               from_memory[from_memory.t == result.t[-1]].heat_rate, rtol=1e-6)
 
 
 def test_heat_rates_need_a_lumped_scene():
@@ -74,3 +83,19 @@ def test_heat_rates_need_a_lumped_scene():
     assert q is not None and np.all(q[1] == 0.0)
     shells = scene.replace({"heat.internal": {"shells": 5}})
     assert heat_rates(dataclasses.replace(frames, scene=shells)) is None
+
+
+def test_no_heat_rate_for_a_scene_of_other_particles():
+    """A result folder whose scene.toml describes other particles (another count): the
+    capacities are unknown, so no heat_rate (and the ParaView export still works)."""
+    import dataclasses
+
+    scene = dh.load_scene("weigler-static")  # 70 particles
+    frames = ParticleFrames(t=np.array([0.0, 1.0]), T=np.full((2, 12), 300.0),
+                            position=np.zeros((2, 12, 2)), diameter=np.full(12, 0.004),
+                            group=np.zeros(12, int), group_names=["a"], scene=scene, name="x")
+    assert heat_rates(frames) is None
+    other_d = dataclasses.replace(frames, T=np.full((2, 70), 300.0),
+                                  position=np.zeros((2, 70, 2)), diameter=np.full(70, 0.005),
+                                  group=np.zeros(70, int))
+    assert heat_rates(other_d) is None

@@ -17,14 +17,21 @@ __all__ = ["particle_table", "heat_rates", "particle_capacities"]
 
 def particle_capacities(frames: ParticleFrames) -> np.ndarray | None:
     """Heat capacity of each particle, J/K (``m c``, weigler-thermal-dem.md section 4), from
-    the frames' scene; None without a scene, or where a particle's temperature is not its
+    the frames' scene; None without a scene, where the scene does not describe these
+    particles (another count or other diameters), or where a particle's temperature is not its
     whole heat content (``[heat.internal]``: radial shells)."""
     scene = frames.scene
     if scene is None or scene.heat.internal is not None:
         return None
     from drumheat.assemble import scene_values, thermal_particles
 
-    return np.asarray(thermal_particles(scene, scene_values(scene)).capacity, float)
+    particles = thermal_particles(scene, scene_values(scene))
+    d = np.asarray(particles.diameter, float)
+    cap = np.asarray(particles.capacity, float)
+    if cap.shape != frames.diameter.shape or (
+            not np.allclose(d, frames.diameter, rtol=1e-9)):
+        return None
+    return cap
 
 
 def heat_rates(frames: ParticleFrames) -> np.ndarray | None:
