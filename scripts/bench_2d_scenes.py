@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from machine import cpu_ticks, load, steal_percent  # scripts/machine.py
+from machine import cpu_ticks, load, print_table, steal_percent  # scripts/machine.py
 
 
 def main():
@@ -54,11 +54,8 @@ def main():
                       flush=True)
     print("\n" + (f"{args.duration:g} s simulated per run" if args.duration
                    else "each scene as built in") + "\n")
-    print("| scene | backend asked | ran | N | run (s) | process (s) | load | steal % |")
-    print("|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]:.1f} | {r[5]:.1f} | {r[6]:.1f} | "
-              f"{r[7]:.1f} |")
+    print_table(["scene", "backend asked", "ran", "N", "run (s)", "process (s)", "load",
+                 "steal %"], rows, ["", "", "", "d", ".1f", ".1f", ".1f", ".1f"])
 
 
 if __name__ == "__main__":

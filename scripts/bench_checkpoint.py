@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from machine import cpu_ticks, steal_percent  # scripts/machine.py
+from machine import cpu_ticks, print_table, steal_percent  # scripts/machine.py
 
 
 def run(scene, duration, out, extra) -> tuple[dict, int, float]:
@@ -65,12 +65,10 @@ def main():
                          1e3 * over / n_ck, size / 1e3, size / n, max(st0, st1)))
             print(f"{scene}: without {s0['wall_time_s']:.1f} s, with {n_ck} checkpoints "
                   f"{s1['wall_time_s']:.1f} s, largest {size / 1e3:.0f} kB", flush=True)
-    print("\n| scene | N | simulated (s) | checkpoints | without (s) | with (s) | per checkpoint "
-          "(ms) | largest (kB) | per particle (B) | steal % |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r[0]} | {r[1]} | {r[2]:g} | {r[3]} | {r[4]:.1f} | {r[5]:.1f} | {r[6]:.0f} | "
-              f"{r[7]:.0f} | {r[8]:.0f} | {r[9]:.1f} |")
+    print()
+    print_table(["scene", "N", "simulated (s)", "checkpoints", "without (s)", "with (s)",
+                 "per checkpoint (ms)", "largest (kB)", "per particle (B)", "steal %"], rows,
+                ["", "d", "g", "d", ".1f", ".1f", ".0f", ".0f", ".0f", ".1f"])
 
 
 if __name__ == "__main__":

@@ -29,3 +29,12 @@ def steal_percent(t0, t1):
     if t0 is None or t1 is None or t1[1] == t0[1]:
         return float("nan")
     return 100.0 * (t1[0] - t0[0]) / (t1[1] - t0[1])
+
+
+def print_table(header, rows, formats) -> None:
+    """A Markdown table: ``header`` (column names), ``rows`` (tuples), ``formats`` (one format
+    spec per column, e.g. ``".1f"``)."""
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    for r in rows:
+        print("| " + " | ".join(format(v, f) for v, f in zip(r, formats)) + " |")
