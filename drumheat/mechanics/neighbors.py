@@ -43,6 +43,7 @@ from typing import Callable, Optional
 import jax
 import jax.numpy as jnp
 import numpy as np
+
 __all__ = [
     "NeighborList",
     "ListError",
@@ -180,10 +181,6 @@ class NeighborList:
     def did_buffer_overflow(self):
         """Whether the pair buffer or a cell overflowed since the last allocation."""
         return self.error.code & (PEC.NEIGHBOR_LIST_OVERFLOW | PEC.CELL_LIST_OVERFLOW)
-
-
-_CELL_OVERFLOW = PEC.CELL_LIST_OVERFLOW
-_PAIR_OVERFLOW = PEC.NEIGHBOR_LIST_OVERFLOW
 
 
 @dataclass(frozen=True)
@@ -331,8 +328,15 @@ class NeighborSetup:
         """Positions in the box frame (shifted by ``-lo``)."""
         return position - jnp.asarray(self.lo, dtype=position.dtype)
 
-    def _list(self, pos, idx, error, cell_capacity, capacity):
-        return NeighborList(idx, pos, error, int(cell_capacity), int(capacity), self.cutoff)
+    def _list(self, pos, built, error, cell_capacity: int):
+        """The list of a build ``(idx, pairs found, fullest cell)`` at box-frame ``pos``, its
+        overflows added to ``error``, pairs in canonical order."""
+        idx, total, fullest = built
+        capacity = idx.shape[1]
+        error = error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > capacity)
+        error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > cell_capacity)
+        return sort_pairs(NeighborList(idx, pos, error, int(cell_capacity), int(capacity),
+                                       self.cutoff), pos.shape[0])
 
     def allocate(self, position, min_capacity: int = 0, min_cell_capacity: int = 0):
         """Allocate a neighbour list at ``position`` (not jittable: it sizes the buffers).
@@ -342,16 +346,12 @@ class NeighborSetup:
         the fullest cell, and at least ``min_cell_capacity``.
         """
         pos = self.to_box(position)
-        n = position.shape[0]
         fullest = int(_fullest_cell(self.grid, pos))
         cell_cap = max(int(min_cell_capacity), int(fullest * self.capacity_multiplier), 1)
         count, _ = _count_pairs(self.grid, pos, cell_cap)
         target = max(int(min_capacity), int(int(count) * self.capacity_multiplier) + 1, 1)
-        idx, total, fullest = _build(self.grid, pos, target, cell_cap)
-        code = (_PAIR_OVERFLOW if int(total) > target else 0) | \
-            (_CELL_OVERFLOW if int(fullest) > cell_cap else 0)
-        error = ListError(jnp.asarray(code, jnp.uint8))
-        return sort_pairs(self._list(pos, idx, error, cell_cap, target), n)
+        return self._list(pos, _build(self.grid, pos, target, cell_cap),
+                          ListError(jnp.zeros((), jnp.uint8)), cell_cap)
 
     def count_pairs(self, position):
         """Number of pairs within the cutoff at ``position`` (host-side, for sizing buffers)."""
@@ -362,12 +362,8 @@ class NeighborSetup:
         """Rebuild the list at ``position`` with the existing capacities (jittable); the
         overflow flags accumulate in ``nbrs.error`` until the next allocation."""
         pos = self.to_box(position)
-        cap = nbrs.idx.shape[1]
-        idx, total, fullest = self.grid.build(pos, cap, nbrs.cell_list_capacity)
-        error = nbrs.error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > cap)
-        error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > nbrs.cell_list_capacity)
-        new = self._list(pos, idx, error, nbrs.cell_list_capacity, nbrs.max_occupancy)
-        return sort_pairs(new, position.shape[0])
+        built = self.grid.build(pos, nbrs.max_occupancy, nbrs.cell_list_capacity)
+        return self._list(pos, built, nbrs.error, nbrs.cell_list_capacity)
 
     def max_displacement_sq(self, position, nbrs):
         """Largest squared displacement (m^2) of any particle since the last build."""

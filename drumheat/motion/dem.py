@@ -297,7 +297,7 @@ class DEMBed(DEMMotion):
     def _switch_to_replay(self, state, log):
         """Continue by cyclic replay of the last ``replay_cycle`` of the recording."""
         cfg = self.scene.dem
-        cycle = cfg.replay_cycle if cfg.replay_cycle is not None else 0.5 * cfg.replay_after
+        cycle = cfg.replayed_cycle
         rec = log["recorder"]
         n_rec = len(rec.pair_ptr) - 1
         recording = Recording(rec.arrays(), first=n_rec - int(round(cycle / cfg.record_interval)))
@@ -383,9 +383,6 @@ class DEMBed(DEMMotion):
                                              self.group)
             counts.append(float(np.asarray(c)))
         return np.array(counts)
-
-    def mechanical_steps(self) -> int:
-        return self.n_coupled * self.steps_per_output
 
     def coupled_until(self) -> float:
         return float(self.t_out[self.n_coupled])

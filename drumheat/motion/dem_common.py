@@ -36,6 +36,8 @@ class DEMMotion(AbstractMotion):
 
     dem = None
     _backend = None
+    #: (seconds per mechanical step, seconds of host work per chunk), set by :meth:`cost`
+    _cost_model = None
 
     def contact_backend(self, batched: bool = False) -> BackendChoice:
         """The contact kernel of this scene's DEM (``[dem] contact_backend``,
@@ -137,10 +139,9 @@ class DEMMotion(AbstractMotion):
         :meth:`cost` ran: the mechanical steps, one per replayed chunk."""
         tc = self.coupled_until()
         steps = max(0.0, min(t1, tc) - min(t0, tc)) / self.dt
-        model = getattr(self, "_cost_model", None)
-        if model is None:
+        if self._cost_model is None:
             return steps if steps > 0 else 1.0
-        per_step, per_chunk = model
+        per_step, per_chunk = self._cost_model
         return steps * per_step + per_chunk
 
     def thermal_steps(self) -> int:

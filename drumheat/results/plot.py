@@ -666,12 +666,11 @@ def cross_section(frames: ParticleFrames, index: int):
 def _replay_note(frames: ParticleFrames, t: float) -> str:
     """What a frame's positions are after ``dem.replay_after``: those of the replayed cycle of
     the recording (the temperatures are the frame's own), or "" before it / without replay."""
-    dem = getattr(frames.scene, "dem", None)
-    after = getattr(dem, "replay_after", None)
-    if after is None or t <= after + 1e-9:
+    dem = frames.scene.dem if frames.scene is not None else None
+    if dem is None or dem.replay_after is None or t <= dem.replay_after + 1e-9:
         return ""
-    cycle = dem.replay_cycle if dem.replay_cycle is not None else 0.5 * after
-    return f"positions replayed from {after - cycle:.3g}-{after:.3g} s"
+    after = dem.replay_after
+    return f"positions replayed from {after - dem.replayed_cycle:.3g}-{after:.3g} s"
 
 
 def plot_snapshot(result, index=-1, ax=None, vmin=None, vmax=None, walls=None, colorbar=True):

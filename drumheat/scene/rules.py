@@ -332,7 +332,7 @@ def _check_consistency(s) -> None:
         if s.dem.record_interval is None:
             raise SceneError("dem.replay_after", s.dem.replay_after, "needs dem.record_interval "
                              "(the contacts to replay)", n)
-        cyc = s.dem.replay_cycle if s.dem.replay_cycle is not None else 0.5 * s.dem.replay_after
+        cyc = s.dem.replayed_cycle
         kc = cyc / s.dem.record_interval
         if cyc > s.dem.replay_after * (1 + 1e-9) or abs(kc - round(kc)) > 1e-6 or round(kc) < 1:
             raise SceneError("dem.replay_cycle", cyc, "must be a whole number of "

@@ -544,6 +544,14 @@ class DEMConfig(Table):
                               "not say which it used (weigler-thermal-dem.md section 12.19).")
 
 
+    @property
+    def replayed_cycle(self) -> Optional[float]:
+        """Seconds of the recording replayed cyclically after ``replay_after``:
+        ``replay_cycle``, by default the second half of the recording (None without replay)."""
+        if self.replay_after is None:
+            return None
+        return self.replay_cycle if self.replay_cycle is not None else 0.5 * self.replay_after
+
 @dataclass(frozen=True)
 class ChannelConfig(Table):
     """``[channel]``: vertical pneumatic channel of motion model 'pneumatic'.
