@@ -292,8 +292,9 @@ class DEMSetup(NamedTuple):
 
     particles: mechanical particles (radius, mass, inertia, group); params: contact tables;
     k_n: normal stiffness, N/m; t_crit: critical step, s; dt: the step asked for (``dem.dt``,
-    else ``safety_factor x t_crit``), s, before a motion model fits it to its intervals
-    (:func:`fit_time_step`); dtype of the mechanics; gravity vector, m/s2; density (N,), kg/m3.
+    else the smaller of ``safety_factor x t_crit`` and the explicit limit of the tangential
+    dashpots, :meth:`ContactParams.dashpot_time_step`), s, before a motion model fits it to
+    its intervals (:func:`fit_time_step`); dtype of the mechanics; gravity vector, m/s2; density (N,), kg/m3.
     """
 
     particles: Particles
@@ -319,9 +320,13 @@ def dem_setup(scene: Scene) -> DEMSetup:
     t_crit = dem_critical_time_step(scene)
     gravity = np.zeros(scene.dim)
     gravity[1] = -cfg.gravity
+    particles = mechanical_particles(0.5 * d, density, group=group)
+    dt = cfg.dt
+    if dt is None:
+        dt = min(cfg.safety_factor * t_crit,
+                 params.dashpot_time_step(float(np.min(np.asarray(particles.mass)))))
     return DEMSetup(
-        particles=mechanical_particles(0.5 * d, density, group=group), params=params, k_n=k_n,
-        t_crit=t_crit, dt=cfg.dt if cfg.dt is not None else cfg.safety_factor * t_crit,
+        particles=particles, params=params, k_n=k_n, t_crit=t_crit, dt=dt,
         dtype=jnp.float32 if cfg.precision == "float32" else jnp.float64, gravity=gravity,
         density=density, conduction_gap=conduction_gaps(scene))
 

@@ -201,7 +201,10 @@ def test_time_step_above_critical_is_refused():
     t_crit = 2 * math.sqrt(m / 2.18e8)
     assert f"{t_crit:.4g}" in msg and "2e-06" in msg and f"{m:.4g}" in msg and "2.18e+08" in msg
     dem = make_dem(part, [DrumShell(0.025)], p, dim=2)
-    assert dem.t_crit == pytest.approx(t_crit) and dem.dt == pytest.approx(0.2 * t_crit)
+    # the default: 0.2 t_crit, or the dashpot limit sqrt(2)/(5 z zeta) sqrt(m/k) (z = 6) below it
+    dashpot = math.sqrt(2) / (5 * 6 * 0.3) * math.sqrt(m / 2.18e8)
+    assert dem.t_crit == pytest.approx(t_crit)
+    assert dem.dt == pytest.approx(min(0.2 * t_crit, dashpot), rel=1e-12)
 
 
 def test_rolling_resistance_stops_rolling_oscillation():

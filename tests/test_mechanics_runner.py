@@ -229,23 +229,71 @@ def test_3d_periodic_drum_turns_stably():
     assert angle_of_repose(pos, r) > 15.0
 
 
-def test_rotating_drum_warns_about_a_time_step_too_coarse_for_flow():
-    """At 0.2 t_crit the 3D glass drum's angle of repose came out 17-19 deg instead of ~30
-    (dt = 0.1 and 0.05 t_crit, and LIGGGHTS); make_dem says so for rotating drums."""
+def test_default_step_is_the_smaller_of_the_two_limits():
+    """dt = min(safety_factor t_crit, dashpot limit); the dashpot limit of equal spheres with
+    k_t = k_n is (sqrt(2) / (5 z zeta_t)) sqrt(m/k) (drumheat.models.soft_sphere)."""
     import warnings
 
-    from drumheat.mechanics import FLOW_SAFETY_FACTOR, DEMAccuracyWarning
+    from drumheat.mechanics import DEMAccuracyWarning
+    from drumheat.models.soft_sphere import STICKING_CONTACTS
+
     part = make_particles(np.full(3, 0.004), 2500.0)
-    p = contact_params(2e3, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
-    with pytest.warns(DEMAccuracyWarning, match="safety_factor"):
-        make_dem(part, [DrumShell(0.125, rpm=9.55)], p, dim=3, periodic_length=0.05,
-                 safety_factor=0.2)
+    m, k = float(part.mass[0]), 2e3
+    drum = [DrumShell(0.125, rpm=9.55)]
+    damped = contact_params(k, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
+    dem = make_dem(part, drum, damped, dim=3, periodic_length=0.05, safety_factor=0.2)
+    assert dem.dt == pytest.approx(math.sqrt(2) / (5 * STICKING_CONTACTS * 0.3)
+                                   * math.sqrt(m / k), rel=1e-12)
+    assert dem.dt / dem.t_crit == pytest.approx(0.0786, abs=1e-4)
+    # no tangential dashpot, no friction to stick with, or no spin: t_crit governs
+    for p, rotation in ((contact_params(k, damping_ratio=0.3, tangential_damping_ratio=0.0,
+                                        wall_tangential_damping_ratio=0.0, friction=0.9,
+                                        wall_friction=0.6), True),
+                        (contact_params(k, damping_ratio=0.3, friction=0.0,
+                                        wall_friction=0.0), True),
+                        (damped, False)):
+        d = make_dem(part, drum, p, dim=3, periodic_length=0.05, safety_factor=0.2,
+                     rotation=rotation)
+        assert d.dt == pytest.approx(0.2 * d.t_crit, rel=1e-12)
+    with pytest.warns(DEMAccuracyWarning, match="dashpots"):
+        make_dem(part, drum, damped, dim=3, periodic_length=0.05, dt=0.1 * dem.t_crit)
     with warnings.catch_warnings():
         warnings.simplefilter("error", DEMAccuracyWarning)
-        make_dem(part, [DrumShell(0.125, rpm=9.55)], p, dim=3, periodic_length=0.05,
-                 safety_factor=FLOW_SAFETY_FACTOR)
-        make_dem(part, [DrumShell(0.125)], p, dim=3, periodic_length=0.05,
-                 safety_factor=0.2)  # drum at rest: pouring
+        make_dem(part, drum, damped, dim=3, periodic_length=0.05, dt=dem.dt)
+
+
+@pytest.mark.parametrize("above", [False, True])
+def test_resting_bed_is_stable_below_the_dashpot_limit(above):
+    """70 spheres (4 mm, aluminium, damping 0.3, friction 0.9 / 0.6) deposited in layers into
+    a 2D drum at rest, most with six neighbours: at the default step (the dashpot limit,
+    0.079 t_crit) the forces are steady; at 0.1 t_crit (the scenes' step before the limit was
+    known) the contacts chatter at half the step frequency, the period-2 component of the
+    forces exceeding the particles' weights (the explicit dashpots overshoot on the spins,
+    drumheat.models.soft_sphere.dashpot_time_step)."""
+    import warnings
+
+    from drumheat.mechanics.deposition import deposit_2d
+
+    R, r, n = 0.025, 0.002, 70
+    p = contact_params(2e4, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
+    packing = deposit_2d(np.full(n, 2 * r), np.zeros(n, int), 2 * R, seed=1)
+    part = make_particles(np.full(n, r), 2700.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dem = make_dem(part, [DrumShell(R)], p, dim=2)
+        if above:
+            dem = make_dem(part, [DrumShell(R)], p, dim=2, dt=0.1 * dem.t_crit)
+    state = dem.run(dem.init(np.asarray(packing.position)), int(round(0.3 / dem.dt)))
+    forces = []
+    for _ in range(16):
+        forces.append(np.asarray(state.force, float))
+        state = dem.run_steps(state, 1)
+    period_2 = np.tensordot((-1.0) ** np.arange(16), np.array(forces), 1) / 16
+    relative = np.linalg.norm(period_2, axis=1) / (np.asarray(part.mass) * 9.81)
+    if above:
+        assert relative.max() > 1.0
+    else:
+        assert relative.max() < 1e-6
 
 
 def test_external_force_and_boundary_update_hooks():

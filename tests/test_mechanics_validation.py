@@ -56,10 +56,12 @@ def test_3d_glass_drum_slice_angle_of_repose():
     the real stiffness 10 revolutions would take 4e7 steps; at 2e3 N/m the overlap under the
     bed's weight is about 1 % of r).
 
-    dt = 0.1 t_crit: at the default 0.2 t_crit the contacts slide where they should stick and
-    the angle came out 17.6 +- 2.7 deg (17-19 deg for N = 2000, L = 6.5 d, wall layer at half
-    the drum speed); at 0.1 and 0.05 t_crit it is 29-32 deg (N = 2000, L = 6.5 d), as LIGGGHTS
-    gets with its own contact parameters (28.6-29.3 deg, peers/liggghts/README.md)."""
+    dt: the dashpot limit, 0.079 t_crit (safety_factor 0.1 is above it). At 0.2 t_crit the
+    tangential dashpots overshoot on the spins, the contacts slide where they should stick and
+    the angle came out 17.4 +- 2.1 deg; without the tangential dashpot 30.2 deg at 0.2 and 0.1
+    t_crit alike (docs/models/dem-mechanics.md, time step); at 0.1 and 0.05 t_crit 29-32 deg
+    (N = 2000, L = 6.5 d), as LIGGGHTS gets with its own contact parameters (28.6-29.3 deg,
+    peers/liggghts/README.md)."""
     R, r, rpm = 0.125, 0.004, 9.55
     L = 4 * (2 * r)  # 4 d
     n = particles_for_filling_degree(0.35, R, r, dim=3, length=L)

@@ -25,7 +25,6 @@ from drumheat.mechanics.errors import (  # noqa: F401
 )
 from drumheat.mechanics.integrator import (  # noqa: F401
     DEM,
-    FLOW_SAFETY_FACTOR,
     DEMAccuracyWarning,
     Contacts,
     DEMState,

@@ -1,14 +1,61 @@
-"""Analysis of DEM states: dynamic angle of repose, kinetic energy, bed centre of mass."""
+"""Analysis of DEM states: dynamic angle of repose, kinetic energy, bed centre of mass, the
+per-particle mechanics written for ParaView."""
 
 from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["free_surface", "angle_of_repose", "center_of_mass", "section_contact_lengths",
-           "SECTION_LENGTHS"]
+           "SECTION_LENGTHS", "particle_mechanics", "PARTICLE_MECHANICS"]
+
+#: the per-particle arrays of :func:`particle_mechanics`, in the order result files list them
+PARTICLE_MECHANICS = ("velocity", "angular_velocity", "force", "coordination", "wall_contacts")
+
+
+def particle_mechanics(dem, state) -> dict:
+    """What each particle does mechanically in ``state``, as float32 arrays (for output files).
+
+    Main arguments:
+      dem: the :class:`~drumheat.mechanics.DEM` system that ``state`` belongs to.
+      state: a :class:`~drumheat.mechanics.DEMState`.
+
+    Returns a dict (keys :data:`PARTICLE_MECHANICS`):
+
+    - ``velocity`` (N, dim) m/s and ``angular_velocity`` (N,) in 2D (the z component) or
+      (N, 3) rad/s: the state's;
+    - ``force`` (N, dim) N: the force on the particle without its weight, i.e. the contact
+      forces of particles and walls (and an external force such as a channel's gas drag);
+    - ``coordination`` (N,): number of particles it overlaps (the mechanical coordination
+      number; the contacts that conduct may include small gaps, ``heat.contact.gap_tolerance``);
+    - ``wall_contacts`` (N,): number of wall primitives it overlaps.
+
+    Pure JAX (``vmap`` over an ensemble's states works); geometry only, the contact law is not
+    evaluated.
+    """
+    pos = state.position
+    n = pos.shape[0]
+    radius = dem.particles.radius.astype(pos.dtype)
+    i, j = state.nbrs.idx[0], state.nbrs.idx[1]
+    valid = i < n
+    ii, jj = jnp.where(valid, i, 0), jnp.where(valid, j, 0)
+    d = dem.neighbor.displacement(pos[jj], pos[ii])
+    touch = (valid & (jnp.sum(d * d, axis=-1) < (radius[ii] + radius[jj]) ** 2)).astype(
+        jnp.float32)
+    coordination = (jax.ops.segment_sum(touch, ii, n) + jax.ops.segment_sum(touch, jj, n))
+    wall_contacts = jnp.zeros(n, jnp.float32)
+    for wall in dem.walls:
+        distance = wall.evaluate(pos, state.time)[0]
+        wall_contacts = wall_contacts + (distance < radius).astype(jnp.float32)
+    weight = dem.particles.mass[:, None] * jnp.asarray(dem.gravity)
+    f32 = jnp.float32
+    return {"velocity": state.velocity.astype(f32),
+            "angular_velocity": state.angular_velocity.astype(f32),
+            "force": (state.force - weight.astype(state.force.dtype)).astype(f32),
+            "coordination": coordination, "wall_contacts": wall_contacts}
 
 
 def free_surface(position, radius, bin_width=None, central_fraction=0.6):

@@ -38,7 +38,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from drumheat.models.soft_sphere import critical_time_step, normal_stiffness_from_youngs  # noqa: F401,E501
+from drumheat.models.soft_sphere import (  # noqa: F401
+    critical_time_step, dashpot_time_step, normal_stiffness_from_youngs)
 
 __all__ = [
     "ContactParams",
@@ -167,6 +168,19 @@ class ContactParams(eqx.Module):
         """Largest stiffness of all tables (N/m), for the critical time step."""
         return float(max(np.max(np.asarray(getattr(self, f)))
                          for f in ("kn_pp", "kt_pp", "kn_pw", "kt_pw")))
+
+    def dashpot_time_step(self, m_min: float) -> float:
+        """The explicit limit of the tangential dashpots on the spin of the lightest particle
+        (mass ``m_min``, kg), :func:`drumheat.models.soft_sphere.dashpot_time_step`, with the
+        largest tangential damping of the contacts that can stick (friction > 0), s."""
+
+        def gamma(zeta, kt, mu, m_eff):
+            zeta, kt, mu = np.broadcast_arrays(*(np.asarray(a, float) for a in (zeta, kt, mu)))
+            g = np.where(mu > 0, 2.0 * zeta * np.sqrt(m_eff * kt), 0.0)
+            return float(np.max(g)) if g.size else 0.0
+
+        return dashpot_time_step(m_min, gamma(self.zeta_t_pp, self.kt_pp, self.mu_pp, m_min / 2),
+                                 gamma(self.zeta_t_pw, self.kt_pw, self.mu_pw, m_min))
 
     def uses_rolling(self):
         return bool(np.any(np.asarray(self.mu_roll_pp) > 0)

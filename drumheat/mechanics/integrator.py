@@ -26,25 +26,19 @@ Integration (velocity Verlet, the "kick-drift-kick" form used by LIGGGHTS ``nve/
 4. ``v += dt/2 F/m``, ``w += dt/2 M/I``.
 
 Time step: ``t_crit = 2 sqrt(m_min / k_max)`` (Weigler digest [2.1], k_max the largest normal
-or tangential stiffness). Default ``dt = 0.2 t_crit`` (``safety_factor``): with
-``dt = 0.4 sqrt(m/k)`` a particle-particle contact lasts about 5.5 steps
-(``pi sqrt(m*/k)``, m* = m/2) and the stiffest single-contact mode, the coupled
-tangential-rotational one (``omega = sqrt(7 k_t/m)``), has ``omega dt = 1.06 < 2`` (Verlet is
-stable below 2). A given ``dt > t_crit`` is refused with a ValueError. For accurate
-restitution use a smaller factor (0.05 gives about 20 steps per contact).
-
-**Stable is not accurate for dense, rotating 3D beds.** The frictional (tangential spring +
-rotation) dynamics of a dense bed need a smaller step than its stability: in the 3D glass drum
-slice (d = 8 mm, D = 0.25 m, 9.55 rpm, N = 2000, thesis contacts k_n = k_t = 2e3 N/m, mu 0.9 /
-0.6, damping ratio 0.3) the dynamic angle of repose came out 17-19 deg with the wall layer at
-0.5-0.6 of the drum's angular velocity at ``dt = 0.2 t_crit``, but 29-31 deg with the wall
-layer at 0.91-0.97 at ``dt = 0.05 t_crit`` (LIGGGHTS with its own parameters: 28.6-29.3 deg;
-drumheat with the LIGGGHTS parameters at dt = 1e-5 s = 0.075 t_crit: about 29-30 deg). With
-``dt = 0.2 t_crit`` a contact lasts ~5.6 steps, and the stick phases of the tangential springs
-are resolved too coarsely: the contacts slide where they should stick, the bed acts as if its
-friction were lower. Use ``safety_factor <= 0.1`` for drum flow (angle of repose, wall slip,
-mixing): over 10 revolutions at 0.1 t_crit the same slice gives 29.8 +- 1.2 deg
-(tests/test_mechanics_validation.py); scenes default to 0.1 (``[dem] safety_factor``).
+or tangential stiffness); a given ``dt > t_crit`` is refused with a ValueError. The default
+step is the smaller of ``safety_factor x t_crit`` (``safety_factor`` 0.2 here, 0.1 in scenes)
+and, for spinning particles, the explicit limit of the tangential dashpots
+(:meth:`ContactParams.dashpot_time_step`, derived in
+:func:`drumheat.models.soft_sphere.dashpot_time_step`): the dashpots use the half-step
+velocities, and a spin braked by several sticking contacts at once overshoots above it (0.079
+t_crit at damping ratio 0.3). Above that limit the contacts of resting and slowly moving
+particles chatter between sticking and sliding at half the step frequency, and a drum bed
+flows as if its friction were lower; a given dt above it is warned about
+(:class:`DEMAccuracyWarning`). The single-contact modes are far inside Verlet's stability
+limit (the tangential-rotational one, ``omega = sqrt(7 k_t/m)``, has ``omega dt = 0.42`` at
+0.079 t_crit). The measurements (angle of repose with and without the tangential dashpot,
+resting beds) are in docs/models/dem-mechanics.md.
 """
 
 from __future__ import annotations
@@ -78,10 +72,10 @@ from drumheat.mechanics.errors import (
     ParticleEscapeError,
 )
 from drumheat.mechanics.neighbors import PEC, NeighborSetup, make_neighbor_setup, remap_pair_data
+from drumheat.models.soft_sphere import STICKING_CONTACTS
 
 __all__ = [
     "DEMAccuracyWarning",
-    "FLOW_SAFETY_FACTOR",
     "Particles",
     "make_particles",
     "DEMState",
@@ -89,11 +83,6 @@ __all__ = [
     "DEM",
     "make_dem",
 ]
-
-
-# largest dt / t_crit at which the flow of a rotating drum comes out right (see the module
-# docstring: the angle of repose of the 3D glass drum slice at 0.05, 0.1 and 0.2 t_crit)
-FLOW_SAFETY_FACTOR = 0.1
 
 
 class DEMAccuracyWarning(UserWarning):
@@ -497,14 +486,17 @@ class DEM:
         return {k: float(v) for k, v in self._energies(state).items()}
 
 
-def _checked_time_step(mass, params, walls, dim, dt, safety_factor, rotation):
-    """``(dt, t_crit, m_min, k_max)``: the DEM time step, by default ``safety_factor x t_crit``
-    (Weigler digest [2.1]); one above ``t_crit`` is refused, one above
-    :data:`FLOW_SAFETY_FACTOR` ``x t_crit`` in a turning 3D drum with friction warned about."""
+def _checked_time_step(mass, params, dt, safety_factor, rotation):
+    """``(dt, t_crit, m_min, k_max)``: the DEM time step, by default the smaller of
+    ``safety_factor x t_crit`` (Weigler digest [2.1]) and, with spin, the explicit limit of the
+    tangential dashpots (:meth:`ContactParams.dashpot_time_step`). A given dt above ``t_crit``
+    is refused; one above the dashpot limit is warned about (:class:`DEMAccuracyWarning`)."""
     m_min = float(np.min(mass))
     k_max = params.k_max()
     t_crit = critical_time_step(m_min, k_max)
-    dt = float(safety_factor * t_crit if dt is None else dt)
+    t_dash = params.dashpot_time_step(m_min) if rotation else math.inf
+    given = dt is not None
+    dt = float(dt if given else min(safety_factor * t_crit, t_dash))
     if not dt > 0:
         raise ValueError(f"time step must be positive, got dt = {dt}")
     if dt > t_crit:
@@ -513,17 +505,15 @@ def _checked_time_step(mass, params, walls, dim, dt, safety_factor, rotation):
             f" = {t_crit:.4g} s (m_min = {m_min:.4g} kg, k_n = {k_max:.4g} N/m; Weigler digest "
             f"[2.1]). Use dt <= {safety_factor * t_crit:.4g} s (safety factor "
             f"{safety_factor}), or soften the contacts (k_n ~ 1/dt^2).")
-    rotating = any(float(np.max(np.abs(np.asarray(getattr(w, "rpm", 0.0))))) > 0 for w in walls)
-    frictional = float(max(np.max(np.asarray(params.mu_pp)), np.max(np.asarray(params.mu_pw)))) > 0
-    # measured in 3D only (the 2D monolayer drums have not been checked for this yet)
-    if dim == 3 and rotation and rotating and frictional and dt > FLOW_SAFETY_FACTOR * t_crit * (1 + 1e-9):
+    if given and dt > t_dash * (1 + 1e-9):
         warnings.warn(
-            f"dt = {dt:.4g} s = {dt / t_crit:.3g} t_crit in a rotating drum: above "
-            f"{FLOW_SAFETY_FACTOR} t_crit the frictional contacts slide where they should stick "
-            "(3D glass drum slice: angle of repose 17-19 deg and the wall layer at half the drum "
-            "speed at 0.2 t_crit, 29-32 deg at 0.1 and 0.05 t_crit, LIGGGHTS 29 deg). Use "
-            f"safety_factor <= {FLOW_SAFETY_FACTOR} for drum flow.", DEMAccuracyWarning,
-            stacklevel=3)
+            f"dt = {dt:.4g} s is above the explicit limit of the tangential dashpots, "
+            f"{t_dash:.4g} s = {t_dash / t_crit:.3g} t_crit (a particle with "
+            f"{STICKING_CONTACTS} sticking contacts): the contacts of resting and slowly "
+            "moving particles chatter between sticking and sliding at half the step frequency, "
+            "a drum bed flows as if its friction were lower and the contact forces of a resting "
+            "bed are wrong (docs/models/dem-mechanics.md, time step). Leave dt to the default "
+            "or lower the tangential damping.", DEMAccuracyWarning, stacklevel=3)
     return dt, t_crit, m_min, k_max
 
 
@@ -599,7 +589,8 @@ def make_dem(
         wall index of ``wall_spring`` / ``Contacts.wall_index``.
       params: :class:`ContactParams`; wall tables (T, W) must match the expanded walls.
       dim: 2 (monolayer of spheres in x-y, spin about z) or 3.
-      dt: time step (s). Default ``safety_factor * t_crit``; a dt above ``t_crit`` is refused.
+      dt: time step (s). Default the smaller of ``safety_factor * t_crit`` and the dashpot
+        limit (module docstring, time step); a dt above ``t_crit`` is refused.
       gravity: vector (m/s^2); default 9.81 along -y.
       periodic_length: period L (m) of the z axis (3D drum slice without end plates); z is
         kept in [0, L).
@@ -673,7 +664,7 @@ def make_dem(
     if int(np.max(np.asarray(particles.ptype))) >= params.n_types:
         raise ValueError(f"particle type {int(np.max(np.asarray(particles.ptype)))} has no row "
                          f"in the contact tables ({params.n_types} types)")
-    dt, t_crit, m_min, k_max = _checked_time_step(mass_np, params, walls, dim, dt, safety_factor,
+    dt, t_crit, m_min, k_max = _checked_time_step(mass_np, params, dt, safety_factor,
                                                   rotation)
     if gravity is None:
         gravity = np.zeros(dim)

@@ -313,7 +313,8 @@ class DEMBed(DEMMotion):
         span = self.steps_per_output * self.dt
         ex = state.extra
         return {"T": ex["T"], "Q": ex["Q"], "position": state.position,
-                "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span}
+                "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span,
+                "mechanics": self.mechanics(state)}
 
     def finish(self, rows, log, state) -> Trajectory:
         n_c = self.n_coupled
@@ -348,7 +349,7 @@ class DEMBed(DEMMotion):
             group=self.group,
             n_contacts=n_pairs, n_wall_contacts=n_wall, wall_area=d2 * cum_wall, extra=extra,
             files={"contacts.npz": rec.save} if rec is not None else {},
-            info=self.backend_info())
+            info=self.backend_info(), mechanics=self.stack_mechanics(rows))
 
     def _interfraction(self, positions) -> np.ndarray:
         """Contacts between the two groups at each output time (mixing observable), with the

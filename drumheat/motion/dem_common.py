@@ -9,14 +9,19 @@ rebuilt on a fresh template of another capacity.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import jax
 
+import numpy as np
+
 from drumheat.mechanics import DEMError, DEMState
+from drumheat.mechanics.analysis import PARTICLE_MECHANICS, particle_mechanics
 from drumheat.mechanics.backend import BackendChoice, choose_contact_backend
 from drumheat.motion.base import AbstractMotion
 from drumheat.motion.coupling import thermal_step_limit
+from drumheat.motion.rows import stack_arrays
 from drumheat.scene import SceneError
 
 __all__ = ["DEMMotion", "WARMUP_STEPS"]
@@ -38,6 +43,8 @@ class DEMMotion(AbstractMotion):
     _backend = None
     #: (seconds per mechanical step, seconds of host work per chunk), set by :meth:`cost`
     _cost_model = None
+    #: the compiled :func:`~drumheat.mechanics.analysis.particle_mechanics` of :meth:`mechanics`
+    _mechanics = None
 
     def contact_backend(self, batched: bool = False) -> BackendChoice:
         """The contact kernel of this scene's DEM (``[dem] contact_backend``,
@@ -61,6 +68,27 @@ class DEMMotion(AbstractMotion):
             info["contact_backend_note"] = (f"'{choice.requested}' asked for; "
                                             f"{choice.reason}")
         return info
+
+    # -- per-particle mechanics in the outputs ----------------------------------------------------
+    def mechanics(self, state) -> dict:
+        """The per-particle mechanics of an output row (velocity, spin, force without weight,
+        contact numbers; :func:`drumheat.mechanics.analysis.particle_mechanics`), compiled
+        once per motion model."""
+        if self._mechanics is None:
+            self._mechanics = jax.jit(functools.partial(particle_mechanics, self.dem))
+        return self._mechanics(state)
+
+    def stack_mechanics(self, rows) -> dict:
+        """The rows' ``"mechanics"`` stacked to ``(n_out, N, ...)`` float32 arrays (disk-backed
+        for a spool); NaN at rows without them (outputs of a replay, which has no mechanics).
+        Empty if no row has them."""
+        first = next((r["mechanics"] for r in rows if "mechanics" in r), None)
+        if first is None:
+            return {}
+        nan = {k: np.full(np.shape(first[k]), np.nan, np.float32) for k in PARTICLE_MECHANICS}
+        return {k: stack_arrays(rows, f"mechanics.{k}",
+                                (r["mechanics"][k] if "mechanics" in r else nan[k]
+                                 for r in rows)) for k in PARTICLE_MECHANICS}
 
     def check(self, start, end, attempt=0):
         """The DEM's host-side check of a chunk (:meth:`drumheat.mechanics.DEM.check_chunk`):

@@ -320,7 +320,8 @@ class MovingBed(DEMMotion):
                 "Q_tubes": ex["Q_walls"][self.geometry.tube_index],
                 "flow": {k: ex["flow"][k] for k in FLOW_RECORDS},
                 "max_overlap": state.max_overlap,
-                "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span}
+                "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span,
+                "mechanics": self.mechanics(state)}
 
     def finish(self, rows, log, state) -> Trajectory:
         r = self.stack_rows(rows)
@@ -340,7 +341,8 @@ class MovingBed(DEMMotion):
             mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),
             group=self.group, n_contacts=np.concatenate([n_pairs[1:2], n_pairs[1:]]),
             n_wall_contacts=np.concatenate([n_wall[1:2], n_wall[1:]]),
-            wall_area=np.zeros(len(t)), extra=ts, records=records, info={"moving_bed": info, **self.backend_info()})
+            wall_area=np.zeros(len(t)), extra=ts, records=records,
+            info={"moving_bed": info, **self.backend_info()}, mechanics=r["mechanics"])
 
     def constants(self) -> dict:
         """What :func:`measure` needs besides the records (JSON-serialisable)."""

@@ -608,7 +608,8 @@ class PneumaticChannel(DEMMotion):
     def observe(self, state) -> dict:
         ex = state.extra
         return {"T": ex["T"], "Q": ex["Q"], "position": state.position, "acc": ex["acc"],
-                "H_gas": ex["H_gas"], "n_active": jnp.sum(ex["active"])}
+                "H_gas": ex["H_gas"], "n_active": jnp.sum(ex["active"]),
+                "mechanics": self.mechanics(state)}
 
     def finish(self, rows, log, state) -> Trajectory:
         """Outputs per ``run.output_interval`` plus the evaluation over the steady window."""
@@ -665,7 +666,8 @@ class PneumaticChannel(DEMMotion):
             diameter=self.diameter, mass=self.mass, capacity=self.capacity, group=self.group,
             n_contacts=np.asarray(pairs), n_wall_contacts=np.asarray(walls),
             wall_area=np.zeros(n_out), extra={k: np.asarray(v, float) for k, v in cols.items()},
-            files=files, info=dict(info, **self.backend_info()), records=records)
+            files=files, info=dict(info, **self.backend_info()), records=records,
+            mechanics=r["mechanics"])
 
 
 def _write_json(path, ev):

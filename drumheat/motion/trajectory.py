@@ -40,6 +40,12 @@ class Trajectory:
         Further results of the motion model that are not time series (JSON-serialisable:
         numbers, strings, lists, dicts), e.g. the phase table of a granulator run or the
         steady-window evaluation of a channel; they go into ``summary.json`` under their keys.
+    mechanics : dict
+        Per-particle mechanics at the output times, for ParaView and
+        :func:`drumheat.particle_table` (DEM motion models): ``velocity``, ``angular_velocity``,
+        ``force``, ``coordination``, ``wall_contacts`` as ``(n_out, N, ...)`` float32 arrays
+        (:func:`drumheat.mechanics.analysis.particle_mechanics`); NaN at outputs without
+        mechanics (a replay). Empty for motion models without a DEM.
     records : dict
         Further arrays of the run for analysis (e.g. the flow counters of a moving bed at the
         output times); not written to files.
@@ -61,3 +67,4 @@ class Trajectory:
     files: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     records: dict = field(default_factory=dict)
+    mechanics: dict = field(default_factory=dict)

@@ -257,7 +257,8 @@ def write_results(result, out_dir=None, figures: bool = True, figure_formats=("p
         traj = result.trajectory
         arrays = dict(t=traj.t, T=traj.T, group=traj.group, diameter=traj.diameter,
                       position=traj.position,
-                      group_names=np.array([g.name for g in result.scene.groups]))
+                      group_names=np.array([g.name for g in result.scene.groups]),
+                      **traj.mechanics)
         np.savez_compressed(tmp / "particles.npz", **arrays)
         (tmp / "scene.toml").write_text(result.scene.to_toml())
         for name, writer in traj.files.items():  # the motion model's own files
@@ -453,7 +454,8 @@ def _json_default(x):
 
 
 def _write_partial_particles(path, times, rows, group, group_names):
-    """``particles.npz`` of the rows a stopped run has (``t``, ``T``, ``position``)."""
+    """``particles.npz`` of the rows a stopped run has (``t``, ``T``, ``position`` and the
+    per-particle mechanics where every row has them)."""
     if not rows or any("T" not in r for r in rows):
         return
     arrays = dict(t=np.asarray(times[:len(rows)], float),
@@ -461,6 +463,10 @@ def _write_partial_particles(path, times, rows, group, group_names):
                   group_names=np.array(group_names))
     if all("position" in r for r in rows):
         arrays["position"] = stack_arrays(rows, "position", (r["position"] for r in rows))
+    if all("mechanics" in r for r in rows):
+        for key in rows[0]["mechanics"]:
+            arrays[key] = stack_arrays(rows, f"mechanics.{key}",
+                                       (r["mechanics"][key] for r in rows))
     tmp = path.with_name(".particles.npz.writing")
     with open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)

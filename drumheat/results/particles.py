@@ -61,6 +61,10 @@ def particle_table(source, every: int = 1) -> pd.DataFrame:
       DataFrame with columns ``t`` (s), ``particle`` (index), ``group`` (name, categorical),
       ``diameter`` (m), ``T`` (K), ``x``, ``y`` (and ``z`` in 3D; m) and, for lumped particles
       with a scene at hand, ``heat_rate`` (W, :func:`heat_rates`; NaN at the first output).
+      Where the run had a DEM also ``vx``, ``vy`` (``vz``; m/s), ``omega_z`` (2D) or
+      ``omega_x``, ``omega_y``, ``omega_z`` (3D; rad/s), ``fx``, ``fy`` (``fz``; N, the force
+      without the weight), ``coordination`` and ``wall_contacts`` (overlapping contacts;
+      :func:`drumheat.mechanics.analysis.particle_mechanics`), NaN at replayed outputs.
       Rows are ordered by time, then particle.
 
     Example::
@@ -87,4 +91,24 @@ def particle_table(source, every: int = 1) -> pd.DataFrame:
     q = heat_rates(frames)
     if q is not None:
         cols["heat_rate"] = q[keep].reshape(-1)
+    cols.update(_mechanics_columns(frames, keep))
     return pd.DataFrame(cols)
+
+
+#: column prefixes of the vector quantities of ParticleFrames.mechanics
+_VECTOR_COLUMNS = {"velocity": "v", "angular_velocity": "omega_", "force": "f"}
+
+
+def _mechanics_columns(frames: ParticleFrames, keep) -> dict:
+    """The per-particle mechanics as flat columns (vector components split by axis)."""
+    cols = {}
+    for key, values in frames.mechanics.items():
+        values = np.asarray(values)[keep]
+        if key not in _VECTOR_COLUMNS:
+            cols[key] = values.reshape(-1)
+        elif values.ndim == 2:  # a 2D spin: its z component
+            cols[_VECTOR_COLUMNS[key] + "z"] = values.reshape(-1)
+        else:
+            for k, axis in enumerate("xyz"[:values.shape[-1]]):
+                cols[_VECTOR_COLUMNS[key] + axis] = values[..., k].reshape(-1)
+    return cols

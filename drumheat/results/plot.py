@@ -20,7 +20,7 @@ scene is :func:`scene_walls`; internals can be added to that list as they come.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -31,6 +31,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from drumheat.assemble import conduction_gaps  # noqa: E402
+from drumheat.mechanics.analysis import PARTICLE_MECHANICS  # noqa: E402
 from drumheat.results import observe  # noqa: E402
 
 #: 0 degC in K.
@@ -75,6 +76,11 @@ class ParticleFrames:
         The scene (from ``scene.toml``), None if the folder has none.
     name : str
         Scene name (or the folder name).
+    mechanics : dict
+        Per-particle mechanics at the output times where the run had a DEM (``velocity``,
+        ``angular_velocity``, ``force``, ``coordination``, ``wall_contacts``, see
+        :func:`drumheat.mechanics.analysis.particle_mechanics`; NaN at replayed outputs);
+        empty otherwise.
     """
 
     t: np.ndarray
@@ -85,6 +91,7 @@ class ParticleFrames:
     group_names: list
     scene: Any = None
     name: str = ""
+    mechanics: dict = field(default_factory=dict)
 
     @property
     def dim(self) -> int:
@@ -107,7 +114,7 @@ class ParticleFrames:
                    diameter=np.asarray(traj.diameter, float),
                    group=np.asarray(traj.group, int),
                    group_names=[g.name for g in result.scene.groups], scene=result.scene,
-                   name=result.scene.name)
+                   name=result.scene.name, mechanics=dict(traj.mechanics))
 
 
 def _positions_per_frame(position, n_out) -> np.ndarray:
@@ -184,7 +191,8 @@ def read_particles(result_dir) -> ParticleFrames:
                           position=_positions_per_frame(arrays["position"], len(t)),
                           diameter=np.asarray(arrays["diameter"], float), group=group,
                           group_names=names, scene=scene,
-                          name=scene.name if scene is not None else folder.name)
+                          name=scene.name if scene is not None else folder.name,
+                          mechanics={k: arrays[k] for k in PARTICLE_MECHANICS if k in arrays})
 
 
 def as_frames(source) -> ParticleFrames:

@@ -13,12 +13,19 @@ ParaView (or any VTK reader) opens directly, written with numpy and the standard
       sphere has radius 0.5);
     - ``temperature`` (K): particle temperature;
     - ``group`` (-): group index (the names are in the field data ``group_names``);
-    - ``velocity`` (m/s): finite differences of the positions between outputs (central inside,
-      one-sided at the ends; zeros for a resting bed);
+    - ``velocity`` (m/s): the particle's velocity where the run had a DEM; otherwise finite
+      differences of the positions between outputs (central inside, one-sided at the ends;
+      zeros for a resting bed);
     - ``id`` (-): particle index, the same at every time;
     - ``heat_rate`` (W): mean heat flow into the particle over the output interval ending at
       this time (:func:`drumheat.results.particles.heat_rates`; 0 at the first output), for
-      lumped particles of a scene at hand.
+      lumped particles of a scene at hand;
+    - where the run had a DEM (:func:`drumheat.mechanics.analysis.particle_mechanics`):
+      ``angular_velocity`` (rad/s, a 3-vector; a 2D disc spins about z), ``force`` (N, the
+      force without the particle's weight: its contacts), ``coordination`` (-, particles it
+      overlaps) and ``wall_contacts`` (-, wall primitives it overlaps). Outputs of a replay
+      (``dem.replay_after``) have no mechanics: these arrays are NaN there (ParaView's
+      NaN colour) and the velocity is the finite difference of the recorded positions.
 
   Points are always 3D; a 2D scene has z = 0. The field data hold ``TIME`` (s) and the group
   names.
@@ -44,6 +51,22 @@ import numpy as np
 
 _VTK_TYPES = {np.dtype("<f8"): "Float64", np.dtype("<f4"): "Float32",
               np.dtype("<i4"): "Int32", np.dtype("<i8"): "Int64", np.dtype("u1"): "UInt8"}
+
+
+def _mechanics_3d(mechanics: dict, dim: int) -> dict:
+    """The per-particle mechanics as VTK point arrays: vectors (n_out, N, 3), a 2D spin as
+    (0, 0, omega_z), counts (n_out, N, 1)."""
+    out = {}
+    for key, values in mechanics.items():
+        values = np.asarray(values, float)
+        if key == "angular_velocity" and dim == 2:
+            values = np.stack([np.zeros_like(values), np.zeros_like(values), values], axis=-1)
+        elif values.ndim == 3:
+            values = _to_3d(values)
+        else:
+            values = values[..., None]
+        out[key] = values
+    return out
 
 
 def _data_array(parent, name, values, n_components=1, binary=True):
@@ -260,6 +283,9 @@ def export_vtk(result_dir, out_dir=None, binary: bool = True, n_segments: int = 
     try:
         pos3 = _to_3d(frames.position)
         vel = _to_3d(particle_velocities(frames.t, frames.position))
+        mech = _mechanics_3d(frames.mechanics, frames.dim)
+        if "velocity" in mech:  # the DEM's own, where it ran (finite differences in a replay)
+            vel = np.where(np.isnan(mech["velocity"]), vel, mech.pop("velocity"))
         q = heat_rates(frames)
         n = pos3.shape[1]
         radius = 0.5 * frames.diameter
@@ -278,6 +304,8 @@ def export_vtk(result_dir, out_dir=None, binary: bool = True, n_segments: int = 
                           "velocity": (vel[k], 3), "id": (ids.astype(np.int32), 1)}
             if q is not None:  # W into each particle over the interval ending here
                 point_data["heat_rate"] = (np.nan_to_num(q[k]), 1)
+            for key, values in mech.items():
+                point_data[key] = (values[k], values.shape[-1])
             doc = _polydata_xml(
                 pos3[k], point_data=point_data,
                 verts=verts, field_data={"TIME": [float(t)], "group_names": names},

@@ -494,15 +494,19 @@ class DEMConfig(Table):
     wall_friction: float = spec(0.6, ge=0, doc="Particle-wall friction coefficient (0.6).")
     rolling_friction: float = spec(0.0, ge=0, doc="Rolling-resistance coefficient.")
     dt: Optional[float] = spec(None, unit="s", gt=0,
-                               doc="Mechanical time step; default safety_factor x t_crit with "
-                                   "t_crit = 2 sqrt(m_min / k_n) (weigler eq. [2.1]); a larger "
-                                   "step than t_crit is refused.")
+                               doc="Mechanical time step; default the smaller of safety_factor "
+                                   "x t_crit (t_crit = 2 sqrt(m_min / k_n), weigler eq. [2.1]) "
+                                   "and the explicit limit of the tangential dashpots (0.079 "
+                                   "t_crit at damping ratio 0.3, docs/models/dem-mechanics.md); "
+                                   "a larger step than t_crit is refused, one above the dashpot "
+                                   "limit warned about.")
     safety_factor: float = spec(
         0.1, gt=0, le=1,
-        doc="dt = safety_factor x t_crit by default. 0.1 because frictional drum flow needs it: "
-            "at 0.2 the contacts slide where they should stick (3D glass drum slice, 9.55 rpm: "
-            "angle of repose 17.6 deg at 0.2, 29-32 deg at 0.1 and 0.05, LIGGGHTS 29 deg; 2D "
-            "weigler-glass-mixing-9.55: 26.8 +- 4.6 deg at 0.2, 29.8 +- 4.7 deg at 0.1).")
+        doc="dt = safety_factor x t_crit by default, or the dashpot limit where that is smaller "
+            "(with tangential damping and friction it is: 0.079 t_crit at damping ratio 0.3, "
+            "0.092 at restitution 0.5). Above the dashpot limit the contacts of resting and "
+            "slowly moving particles chatter and slide where they should stick "
+            "(docs/models/dem-mechanics.md, time step).")
     skin: Optional[float] = spec(None, unit="m", gt=0,
                                  doc="Neighbour-list skin; default half the largest diameter.")
     contact_backend: str = spec(
