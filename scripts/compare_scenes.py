@@ -27,6 +27,8 @@ import pandas as pd
 #: per-scene overrides that keep each scene's code path but make it short
 SHORT = {
     "fluidized-bed-coffee": {"run.duration": 20.0},
+    "glass-drum-3d": {"run.duration": 0.3, "run.output_interval": 0.1, "dem.replay_after": 0.2,
+                      "dem.replay_cycle": 0.1},
     "herz-sectional-drum": {"run.duration": 0.5, "run.output_interval": 0.25,
                             "groups.0.count": 800},
     "kraychev-channel": {"run.duration": 0.1, "run.output_interval": 0.05,

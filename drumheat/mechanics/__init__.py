@@ -1,6 +1,7 @@
 """drumheat.mechanics: soft-sphere DEM on cell-list neighbour lists (jax-md's layout).
 
-Contact laws (:mod:`.contact_forces`), neighbour lists with tangential history
+Contact laws (:mod:`.contact_forces`), the contact forces of a step behind one signature, in
+JAX or the C++ loop (:mod:`.forces`), neighbour lists with tangential history
 (:mod:`.neighbors`), velocity-Verlet integration with a checked chunked runner
 (:mod:`.integrator`), per-step contact conduction in the force loop (:mod:`.conduction`), the
 opt-in C++ contact kernel for CPUs (:mod:`.cpu_kernel`), bed generation (:mod:`.pour`),
@@ -23,10 +24,10 @@ from drumheat.mechanics.errors import (  # noqa: F401
     OverlapError,
     ParticleEscapeError,
 )
+from drumheat.mechanics.forces import Contacts, ContactForces, make_contact_forces  # noqa: F401
 from drumheat.mechanics.integrator import (  # noqa: F401
     DEM,
     DEMAccuracyWarning,
-    Contacts,
     DEMState,
     Particles,
     make_dem,

@@ -54,23 +54,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.geometry.walls import expand_walls, rpm_to_omega, wall_bounds
-from drumheat.mechanics.contact_forces import (
-    ContactParams,
-    contact_law,
-    critical_time_step,
-    cross_a_f,
-    cross_w_a,
-    rolling_torque,
-)
+from drumheat.geometry.walls import expand_walls, wall_bounds
+from drumheat.mechanics.contact_forces import ContactParams, critical_time_step
 from drumheat.mechanics.conduction import PairConduction
-from drumheat.mechanics.conduction import heat_flow as pair_heat_flow
 from drumheat.mechanics.errors import (
     NeighborListError,
     NonFiniteError,
     OverlapError,
     ParticleEscapeError,
 )
+from drumheat.mechanics.forces import ContactForces, Contacts, make_contact_forces
 from drumheat.mechanics.neighbors import PEC, NeighborSetup, make_neighbor_setup, remap_pair_data
 from drumheat.models.soft_sphere import STICKING_CONTACTS
 
@@ -148,38 +141,6 @@ class DEMState(NamedTuple):
     extra: Any = None
 
 
-class Contacts(NamedTuple):
-    """Contacts of the current step as fixed-size padded arrays (for the heat model).
-
-    Particle-particle (length = neighbour capacity M): ``pair_i < pair_j`` (padding = N),
-    ``pair_mask`` true for touching pairs, each contact once; ``pair_overlap`` (m),
-    ``pair_distance`` centre distance L (m, the thermal-pipe length of Weigler digest [2.5]),
-    ``pair_normal_force`` (N).
-    Particle-wall (length N*W, row-major over (particle, wall primitive)): ``wall_particle``,
-    ``wall_index`` (primitive index into the wall tuple), ``wall_id`` (the walls' labels),
-    ``wall_mask``, ``wall_overlap`` (m), ``wall_normal_force`` (N).
-    ``pair_conducts`` / ``wall_conducts``: the contacts that conduct heat, those that overlap or
-    whose surface gap is within the conduction gap tolerance (``make_dem(conduction_gap=...)``;
-    without one they equal the masks).
-    Always multiply by the masks: padded entries hold index N (pairs) and zeros.
-    """
-
-    pair_i: jax.Array
-    pair_j: jax.Array
-    pair_mask: jax.Array
-    pair_overlap: jax.Array
-    pair_distance: jax.Array
-    pair_normal_force: jax.Array
-    wall_particle: jax.Array
-    wall_index: jax.Array
-    wall_id: jax.Array
-    wall_mask: jax.Array
-    wall_overlap: jax.Array
-    wall_normal_force: jax.Array
-    pair_conducts: jax.Array
-    wall_conducts: jax.Array
-
-
 # XLA:CPU options for the DEM kernels. Its YNNPACK library fusions (on by default in jaxlib
 # 0.10) run the narrow (pairs, 3) element-wise work of the contact law 2-30x slower than XLA's
 # own loop fusions: on the N = 2000 3D drum of scripts/bench_vs_liggghts.py they doubled the
@@ -207,19 +168,6 @@ def wrap_periodic_axis(pos, periodic_length, near: bool = False):
 
 def _jit(fun):
     return jax.jit(fun, compiler_options=JIT_OPTIONS)
-
-
-def _materialize(tree, pred):
-    """Return ``tree`` unchanged but computed once, before its consumers run.
-
-    XLA:CPU removes ``optimization_barrier`` before fusion, and its fusion heuristics then fuse
-    the contact law into the concatenation of the scatter update, recomputing it for each of
-    the output columns (measured: half of the force kernel). A conditional on a runtime
-    predicate is a fusion boundary that XLA cannot remove; ``pred`` must always be true at
-    run time (the other branch, never taken, returns zeros so that the branches differ).
-    """
-    return jax.lax.cond(pred, lambda t: t,
-                        lambda t: jax.tree_util.tree_map(jnp.zeros_like, t), tree)
 
 
 def pair_extra(extra):
@@ -486,6 +434,136 @@ class DEM:
         return {k: float(v) for k, v in self._energies(state).items()}
 
 
+def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin,
+                     periodic_length, rotation, always_rebuild, batch_axis, external_force,
+                     conduction, extra_update, boundary_update):
+    """``(step, run_steps, energies)`` of :func:`make_dem`: the velocity-Verlet step over the
+    contact forces (module docstring, integration), the loop of steps between neighbour
+    rebuilds, and the energy book."""
+    n, mass, inertia, dtype = forces.n, forces.mass, forces.inertia, forces.dtype
+    half = 0.5 * dt
+    inv_m = 1.0 / mass
+    inv_i = 1.0 / inertia
+    half_skin_sq = (0.5 * skin) ** 2
+    time_dtype = jnp.float64 if jax.config.jax_enable_x64 else dtype
+
+    def _wrap(pos):
+        return wrap_periodic_axis(pos, periodic_length, near=True)
+
+    def rebuild(args):
+        pos, nbrs, spring, count, pdata = args
+        new = neighbor.rebuild(pos, nbrs)
+        remap = lambda a: remap_pair_data(nbrs.idx, a, new.idx, n)  # noqa: E731
+        return new, remap(spring), count + 1, jax.tree_util.tree_map(remap, pdata)
+
+    def keep(args):
+        pos, nbrs, spring, count, pdata = args
+        return nbrs, spring, count, pdata
+
+    def drift(state: DEMState):
+        """First half-kick and drift: half-step velocities, spins and the new positions."""
+        v = state.velocity + half * state.force * inv_m[:, None]
+        if rotation:
+            tq = state.torque
+            w = state.angular_velocity + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
+        else:
+            w = state.angular_velocity
+        return v, w, _wrap(state.position + dt * v)
+
+    def needs_rebuild(state: DEMState, x):
+        return neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
+
+    def step(state: DEMState, pairs: str = "check", drifted=None):
+        # pairs: "check" (rebuild the neighbour list if some particle moved more than half the
+        # skin: a lax.cond), "keep" (the caller knows it need not) or "rebuild"; drifted:
+        # drift(state) if the caller has it already
+        v, w, x = drift(state) if drifted is None else drifted
+        t = state.time + jnp.asarray(dt, time_dtype)
+        extra = state.extra
+        args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
+        if always_rebuild or pairs == "rebuild":
+            nbrs, spring, count, pdata = rebuild(args)
+        elif pairs == "keep":
+            nbrs, spring, count, pdata = keep(args)
+        else:
+            need = needs_rebuild(state, x)
+            if batch_axis is not None:
+                need = jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
+            nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
+        if pdata is not None:
+            extra = dict(extra, pair_data=pdata)
+        f, tq, spring, wspring, contacts, ovl, heat = forces(
+            x, v, w, t, nbrs, spring, state.wall_spring,
+            temperature=extra if conduction is not None else None)
+        if external_force is not None:
+            f = f + external_force(x, v, t, extra).astype(dtype)
+        v = v + half * f * inv_m[:, None]
+        if rotation:
+            w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
+        new = DEMState(position=x, velocity=v, angular_velocity=w, force=f, torque=tq, time=t,
+                       step=state.step + 1, nbrs=nbrs, pair_spring=spring, wall_spring=wspring,
+                       n_rebuilds=count, max_overlap=jnp.maximum(state.max_overlap, ovl),
+                       extra=extra)
+        if conduction is not None:
+            new = new._replace(extra=extra + dt * heat / conduction.heat_capacity)
+        if extra_update is not None:
+            new = new._replace(extra=extra_update(new.extra, new, contacts, dt))
+        if boundary_update is not None:
+            new = boundary_update(new)
+        return new, contacts
+
+    def energies(state):
+        m = mass
+        ek = 0.5 * jnp.sum(m[:, None] * state.velocity**2)
+        w2 = state.angular_velocity**2
+        if w2.ndim == 2:
+            w2 = jnp.sum(w2, axis=-1)
+        er = 0.5 * jnp.sum(inertia * w2)
+        ep = -jnp.sum(m * (state.position @ forces.g_vec))
+        c = forces(state.position, state.velocity, state.angular_velocity, state.time,
+                   state.nbrs, state.pair_spring, state.wall_spring).contacts
+        el = forces.elastic_energy(c, state.pair_spring, state.wall_spring)
+        return dict(kinetic=ek, rotational=er, potential=ep, elastic=el,
+                    total=ek + er + ep + el)
+
+    def run_steps(state, n_steps):
+        # a loop with a traced trip count: one compilation serves every chunk length
+        if batch_axis is not None or always_rebuild:
+            return jax.lax.fori_loop(0, n_steps, lambda k, st: step(st)[0], state)
+        return run_segments(state, n_steps)
+
+    def run_segments(state, n_steps):
+        """The same steps as ``fori_loop(step)``, as runs of steps between neighbour rebuilds.
+
+        Inside a run the neighbour list is known to stay valid (the loop condition tests the
+        coming step's drift against the skin), so the step carries it unchanged; each run ends
+        with one step that rebuilds. Without the per-step ``lax.cond`` XLA updates the pair
+        arrays in place instead of copying the neighbour indices and springs every step
+        (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
+        the trajectory, are those of :func:`step`.
+        """
+        # the carry holds the coming step's drift, computed once: the loop condition tests it
+        # against the skin and the step goes on from it
+        def advance(c, pairs):
+            st, k, d = c
+            new = step(st, pairs, d)[0]
+            return new, k + 1, drift(new)
+
+        def go_on(c):
+            st, k, d = c
+            return (k < n_steps) & ~needs_rebuild(st, d[2])
+
+        def segment(c):
+            c = jax.lax.while_loop(go_on, lambda c: advance(c, "keep"), c)
+            return jax.lax.cond(c[1] < n_steps, lambda c: advance(c, "rebuild"), lambda c: c, c)
+
+        k0 = jnp.zeros_like(jnp.asarray(n_steps))
+        return jax.lax.while_loop(lambda c: c[1] < n_steps, segment,
+                                  (state, k0, drift(state)))[0]
+
+    return step, run_steps, energies
+
+
 def _checked_time_step(mass, params, dt, safety_factor, rotation):
     """``(dt, t_crit, m_min, k_max)``: the DEM time step, by default the smaller of
     ``safety_factor x t_crit`` (Weigler digest [2.1]) and, with spin, the explicit limit of the
@@ -641,22 +719,13 @@ def make_dem(
                          f"got {conduction_gap}")
     if dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3, got {dim}")
-    if pair_kernel not in ("jax", "cpu"):
-        raise ValueError(f"pair_kernel must be 'jax' or 'cpu', got {pair_kernel!r}")
-    use_cpu_kernel = pair_kernel == "cpu"
     if conduction is not None:
         conduction = PairConduction(*conduction).checked(particles.n)
-    if use_cpu_kernel:
-        import drumheat.mechanics.cpu_kernel as cpu_kernel
-
-        cpu_kernel.check_supported(dim, params, dtype, batch_axis)
-        cpu_kernel.load()
     walls = expand_walls(walls) if walls is not None else ()
     n_w = len(walls)
     if params.kn_pw.shape[1] not in (1, n_w) and n_w > 0:
         raise ValueError(f"wall parameter tables have {params.kn_pw.shape[1]} columns but there "
                          f"are {n_w} wall primitives")
-    n = particles.n
     radius_np = np.asarray(particles.radius)
     mass_np = np.asarray(particles.mass)
     if np.any(radius_np <= 0) or np.any(mass_np <= 0):
@@ -682,356 +751,14 @@ def make_dem(
     periodic_axis = dim - 1 if periodic_length is not None else None
 
     dtype = jnp.dtype(dtype)
-    radius = particles.radius.astype(dtype)
-    mass = particles.mass.astype(dtype)
-    inertia = particles.inertia.astype(dtype)
-    ptype = particles.ptype
-    single_type = params.n_types == 1
-    use_rolling = params.uses_rolling()
-    g_vec = jnp.asarray(gravity, dtype)
-    displacement = neighbor.displacement
-    wall_ids = np.array([w.wall_id for w in walls], dtype=np.int32)
-    wall_omega = [rpm_to_omega(getattr(w, "rpm", 0.0)) for w in walls]
-    dt_c = jnp.asarray(dt, dtype)
-
-    def table(tab, a, b):
-        tab = tab.astype(dtype)
-        if single_type:
-            return tab[0, 0]
-        return tab[a, b]
-
-    def wall_table(tab):
-        tab = jnp.broadcast_to(tab.astype(dtype), (params.n_types, n_w))
-        if single_type:
-            return tab[0][None, :]
-        return tab[ptype]
-
-    if use_cpu_kernel:
-        # the C++ kernel's contact tables, wall spins, dt, period and rotation flag
-        cpu_params = cpu_kernel.kernel_params(params, n_w, dtype, dt, wall_omega,
-                                              periodic_length, rotation)
-
-    def forces(pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature=None):
-        # one set of (half-step) velocities for the dashpots and the spring increment
-        force = mass[:, None] * g_vec
-        torque = jnp.zeros_like(w)
-        # ---- particle-particle -----------------------------------------------------------------
-        i = nbrs.idx[0]
-        j = nbrs.idx[1]
-        in_kernel = use_cpu_kernel
-        if in_kernel:
-            # pairs and walls in one C++ loop (drumheat.mechanics.cpu_kernel), the wall geometry
-            # from JAX; its per-slot outputs are already zero where nothing touches
-            wd, wn, wv = wall_geometry(pos, t)
-            heat_args = {}
-            if conduction is not None and temperature is not None:
-                heat_args = dict(temperature=temperature, conduction_law=conduction.law,
-                                 conduction_h=conduction.coefficient,
-                                 gap_tolerance=conduction.gap_tolerance)
-            (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx,
-             heat) = cpu_kernel.contacts(pos, vel, w, radius, mass, inertia, ptype, nbrs.idx,
-                                         pair_spring, wd, wn, wv, wall_spring, **cpu_params,
-                                         **heat_args)
-            force = force + fk
-            torque = torque + tk
-            active = ovl > 0
-            max_ovl = mx[0]
-            w_part, w_idx, w_id, w_mask, w_ovl, w_fn = wall_slots(w_ovl > 0, w_ovl, w_fn)
-            p_cond = active
-            if gap_pp > 0:  # the kernel leaves dist zero where nothing touches
-                p_cond = pair_gap_mask(pos, i, j)
-            w_cond = wall_gap_mask(wd, w_mask)
-        else:
-            force, torque, new_spring, ovl, dist, fn, active, max_ovl = pair_part(
-                pos, vel, w, nbrs, pair_spring, force, torque, i, j)
-            pair_dist = dist  # every pair's, for the conduction gap tolerance (heat_flow)
-            p_cond = active
-            if gap_pp > 0:
-                r_i, r_j = radius[jnp.where(i < n, i, 0)], radius[jnp.where(j < n, j, 0)]
-                p_cond = (i < n) & (ovl >= -gap_pp * 2.0 * jnp.minimum(r_i, r_j))
-            ovl = jnp.where(active, ovl, 0.0)
-            dist = jnp.where(active, dist, 0.0)
-            wall_out = wall_part(pos, vel, w, t, wall_spring, force,
-                                 torque, max_ovl)
-            force, torque, new_wall_spring, max_ovl, w_part, w_idx, w_id, w_mask, w_ovl, w_fn = \
-                wall_out[:10]
-            w_cond = wall_gap_mask(wall_out[10], w_mask)
-        contacts = Contacts(
-            pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
-            pair_normal_force=fn,
-            wall_particle=w_part, wall_index=w_idx, wall_id=w_id, wall_mask=w_mask,
-            wall_overlap=w_ovl, wall_normal_force=w_fn, pair_conducts=p_cond,
-            wall_conducts=w_cond)
-        if conduction is None or temperature is None:
-            heat = None
-        elif not in_kernel:
-            heat = pair_heat_flow(temperature, contacts, particles.radius, conduction.law,
-                                  conduction.coefficient, conduction.gap_tolerance, pair_dist)
-        return force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat
-
-    def pair_part(pos, vel, w, nbrs, pair_spring, force, torque, i, j):
-        valid = i < n
-        ii = jnp.where(valid, i, 0)
-        jj = jnp.where(valid, j, 0)
-        d = displacement(pos[jj], pos[ii])  # from i to j
-        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
-        dist_safe = jnp.where(valid & (dist > 0), dist, 1.0)
-        nrm = d / dist_safe[:, None]
-        ri = radius[ii]
-        rj = radius[jj]
-        ovl = ri + rj - dist
-        active = valid & (ovl > 0)
-        a_i = (ri - 0.5 * ovl)[:, None] * nrm
-        a_j = -(rj - 0.5 * ovl)[:, None] * nrm
-        wi = w[ii]
-        wj = w[jj]
-        v_rel = (vel[jj] + cross_w_a(wj, a_j)) - (vel[ii] + cross_w_a(wi, a_i))
-        mi = mass[ii]
-        mj = mass[jj]
-        m_eff = mi * mj / (mi + mj)
-        ti = ptype[ii]
-        tj = ptype[jj]
-        res = contact_law(nrm, ovl, v_rel, m_eff,
-                          table(params.kn_pp, ti, tj), table(params.kt_pp, ti, tj),
-                          table(params.zeta_n_pp, ti, tj), table(params.zeta_t_pp, ti, tj),
-                          table(params.mu_pp, ti, tj), pair_spring, dt_c, active)
-        f = res.force
-        seg = jnp.concatenate([i, j])  # padding N is dropped by segment_sum
-        if not rotation:
-            force = force + jax.ops.segment_sum(jnp.concatenate([-f, f]), seg, n)
-        else:
-            tq_i = cross_a_f(a_i, -f)
-            tq_j = cross_a_f(a_j, f)
-            if use_rolling:
-                r_eff = ri * rj / (ri + rj)
-                ii_ = inertia[ii]
-                ij_ = inertia[jj]
-                m_r = rolling_torque(wj - wi, res.normal_force, r_eff,
-                                     table(params.mu_roll_pp, ti, tj), ii_ * ij_ / (ii_ + ij_),
-                                     dt_c)
-                m_r = jnp.where(active[:, None] if m_r.ndim == 2 else active, m_r, 0.0)
-                tq_j = tq_j + m_r
-                tq_i = tq_i - m_r
-            # forces and torques in one scatter (the same additions in the same order as two
-            # scatters); the barrier keeps XLA from fusing the contact law into the
-            # concatenation, where it would be recomputed once per output column
-            tcol = (lambda a: a[:, None]) if tq_i.ndim == 1 else (lambda a: a)
-            f, tq_i, tq_j = _materialize((f, tq_i, tq_j), i[0] <= n)
-            upd = jnp.concatenate([jnp.concatenate([-f, tcol(tq_i)], axis=1),
-                                   jnp.concatenate([f, tcol(tq_j)], axis=1)])
-            tot = jax.ops.segment_sum(upd, seg, n)
-            force = force + tot[:, :dim]
-            torque = torque + (tot[:, dim] if tq_i.ndim == 1 else tot[:, dim:])
-        rmin_pair = jnp.minimum(ri, rj)
-        max_ovl = jnp.max(jnp.where(active, ovl / rmin_pair, 0.0), initial=0.0)
-        return force, torque, res.spring, ovl, dist, res.normal_force, active, max_ovl
-
-    def wall_part(pos, vel, w, t, wall_spring, force, torque, max_ovl):
-        # ---- particle-wall ---------------------------------------------------------------------
-        if n_w > 0:
-            wd, wn, wv = wall_geometry(pos, t)
-            r_ = radius[:, None]
-            wovl = r_ - wd
-            wact = wovl > 0
-            a = -(r_ - 0.5 * wovl)[..., None] * wn
-            v_relw = vel[:, None, :] + cross_w_a(w[:, None], a) - wv
-            m_w = jnp.broadcast_to(mass[:, None], wd.shape)
-            resw = contact_law(wn, wovl, v_relw, m_w,
-                               wall_table(params.kn_pw), wall_table(params.kt_pw),
-                               wall_table(params.zeta_n_pw), wall_table(params.zeta_t_pw),
-                               wall_table(params.mu_pw), wall_spring, dt_c, wact)
-            force = force + jnp.sum(resw.force, axis=1)
-            if rotation:
-                tq = cross_a_f(a, resw.force)
-                if use_rolling:
-                    if dim == 2:
-                        w_wall = jnp.asarray(wall_omega, dtype)[None, :]
-                        w_rel = w[:, None] - w_wall
-                    else:
-                        w_wall = jnp.zeros((n_w, 3), dtype).at[:, 2].set(
-                            jnp.asarray(wall_omega, dtype))
-                        w_rel = w[:, None, :] - w_wall[None]
-                    m_r = rolling_torque(w_rel, resw.normal_force, r_,
-                                         wall_table(params.mu_roll_pw), inertia[:, None], dt_c)
-                    m_r = jnp.where(wact[..., None] if m_r.ndim == 3 else wact, m_r, 0.0)
-                    tq = tq + m_r
-                torque = torque + jnp.sum(tq, axis=1)
-            new_wall_spring = resw.spring
-            max_ovl = jnp.maximum(max_ovl, jnp.max(jnp.where(wact, wovl / r_, 0.0)))
-            slots = wall_slots(wact, wovl, resw.normal_force)
-        else:
-            new_wall_spring = wall_spring
-            slots = wall_slots(None, None, None)
-            wd = jnp.zeros((n, 0), dtype)
-        return (force, torque, new_wall_spring, max_ovl) + slots + (wd,)
-
-    def wall_geometry(pos, t):
-        """Distance (N, W), unit normal towards the particle and wall velocity (N, W, dim)."""
-        if n_w == 0:
-            return (jnp.zeros((n, 0), dtype), jnp.zeros((n, 0, dim), dtype),
-                    jnp.zeros((n, 0, dim), dtype))
-        evs = [wl.evaluate(pos, t) for wl in walls]
-        return tuple(jnp.stack([e[k] for e in evs], axis=1).astype(dtype) for k in range(3))
-
-    def pair_gap_mask(pos, i, j):
-        """Neighbour pairs within the conduction gap (``conduction_gap``), from the positions."""
-        valid = i < n
-        ii, jj = jnp.where(valid, i, 0), jnp.where(valid, j, 0)
-        d = displacement(pos[jj], pos[ii])
-        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
-        ri, rj = radius[ii], radius[jj]
-        return valid & (ri + rj - dist >= -gap_pp * 2.0 * jnp.minimum(ri, rj))
-
-    def wall_gap_mask(wd, w_mask):
-        """Particle-wall slots within the conduction gap, flattened like ``wall_mask``."""
-        if n_w == 0 or gap_pw == 0:
-            return w_mask
-        r_ = radius[:, None]
-        return ((r_ - wd) >= -gap_pw * 2.0 * r_).reshape(-1)
-
-    def wall_slots(wact, wovl, wfn):
-        """The wall fields of :class:`Contacts`, flattened over the (N, W) slots."""
-        if n_w == 0:
-            empty = jnp.zeros((0,), jnp.int32)
-            return (empty, empty, empty, jnp.zeros((0,), bool), jnp.zeros((0,), dtype),
-                    jnp.zeros((0,), dtype))
-        w_part = jnp.repeat(jnp.arange(n, dtype=jnp.int32), n_w)
-        w_idx = jnp.tile(jnp.arange(n_w, dtype=jnp.int32), n)
-        w_id = jnp.tile(jnp.asarray(wall_ids), n)
-        return (w_part, w_idx, w_id, wact.reshape(-1), jnp.where(wact, wovl, 0.0).reshape(-1),
-                wfn.reshape(-1))
-
-    half = 0.5 * dt
-    inv_m = 1.0 / mass
-    inv_i = 1.0 / inertia
-    half_skin_sq = (0.5 * skin) ** 2
-    time_dtype = jnp.float64 if jax.config.jax_enable_x64 else dtype
-
-    def _wrap(pos):
-        return wrap_periodic_axis(pos, periodic_length, near=True)
-
-    def rebuild(args):
-        pos, nbrs, spring, count, pdata = args
-        new = neighbor.rebuild(pos, nbrs)
-        remap = lambda a: remap_pair_data(nbrs.idx, a, new.idx, n)  # noqa: E731
-        return new, remap(spring), count + 1, jax.tree_util.tree_map(remap, pdata)
-
-    def keep(args):
-        pos, nbrs, spring, count, pdata = args
-        return nbrs, spring, count, pdata
-
-    def drift(state: DEMState):
-        """First half-kick and drift: half-step velocities, spins and the new positions."""
-        v = state.velocity + half * state.force * inv_m[:, None]
-        if rotation:
-            tq = state.torque
-            w = state.angular_velocity + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
-        else:
-            w = state.angular_velocity
-        return v, w, _wrap(state.position + dt * v)
-
-    def needs_rebuild(state: DEMState, x):
-        return neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
-
-    def step(state: DEMState, pairs: str = "check", drifted=None):
-        # pairs: "check" (rebuild the neighbour list if some particle moved more than half the
-        # skin: a lax.cond), "keep" (the caller knows it need not) or "rebuild"; drifted:
-        # drift(state) if the caller has it already
-        v, w, x = drift(state) if drifted is None else drifted
-        t = state.time + jnp.asarray(dt, time_dtype)
-        extra = state.extra
-        args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
-        if always_rebuild or pairs == "rebuild":
-            nbrs, spring, count, pdata = rebuild(args)
-        elif pairs == "keep":
-            nbrs, spring, count, pdata = keep(args)
-        else:
-            need = needs_rebuild(state, x)
-            if batch_axis is not None:
-                need = jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
-            nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
-        if pdata is not None:
-            extra = dict(extra, pair_data=pdata)
-        f, tq, spring, wspring, contacts, ovl, heat = forces(
-            x, v, w, t, nbrs, spring, state.wall_spring,
-            temperature=extra if conduction is not None else None)
-        if external_force is not None:
-            f = f + external_force(x, v, t, extra).astype(dtype)
-        v = v + half * f * inv_m[:, None]
-        if rotation:
-            w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
-        new = DEMState(position=x, velocity=v, angular_velocity=w, force=f, torque=tq, time=t,
-                       step=state.step + 1, nbrs=nbrs, pair_spring=spring, wall_spring=wspring,
-                       n_rebuilds=count, max_overlap=jnp.maximum(state.max_overlap, ovl),
-                       extra=extra)
-        if conduction is not None:
-            new = new._replace(extra=extra + dt * heat / conduction.heat_capacity)
-        if extra_update is not None:
-            new = new._replace(extra=extra_update(new.extra, new, contacts, dt))
-        if boundary_update is not None:
-            new = boundary_update(new)
-        return new, contacts
-
-    def energies(state):
-        m = mass
-        ek = 0.5 * jnp.sum(m[:, None] * state.velocity**2)
-        w2 = state.angular_velocity**2
-        if w2.ndim == 2:
-            w2 = jnp.sum(w2, axis=-1)
-        er = 0.5 * jnp.sum(inertia * w2)
-        ep = -jnp.sum(m * (state.position @ g_vec))
-        c = forces(state.position, state.velocity, state.angular_velocity, state.time,
-                   state.nbrs, state.pair_spring, state.wall_spring)[4]
-        i = jnp.where(c.pair_mask, c.pair_i, 0)
-        j = jnp.where(c.pair_mask, c.pair_j, 0)
-        kn = table(params.kn_pp, ptype[i], ptype[j])
-        kt = table(params.kt_pp, ptype[i], ptype[j])
-        el = 0.5 * jnp.sum(jnp.where(c.pair_mask, kn * c.pair_overlap**2
-                                     + kt * jnp.sum(state.pair_spring**2, -1), 0.0))
-        if n_w > 0:
-            knw = jnp.broadcast_to(wall_table(params.kn_pw), (n, n_w)).reshape(-1)
-            ktw = jnp.broadcast_to(wall_table(params.kt_pw), (n, n_w)).reshape(-1)
-            xi2 = jnp.sum(state.wall_spring**2, -1).reshape(-1)
-            el = el + 0.5 * jnp.sum(jnp.where(c.wall_mask, knw * c.wall_overlap**2 + ktw * xi2,
-                                              0.0))
-        return dict(kinetic=ek, rotational=er, potential=ep, elastic=el,
-                    total=ek + er + ep + el)
-
-    def run_steps(state, n_steps):
-        # a loop with a traced trip count: one compilation serves every chunk length
-        if batch_axis is not None or always_rebuild:
-            return jax.lax.fori_loop(0, n_steps, lambda k, st: step(st)[0], state)
-        return run_segments(state, n_steps)
-
-    def run_segments(state, n_steps):
-        """The same steps as ``fori_loop(step)``, as runs of steps between neighbour rebuilds.
-
-        Inside a run the neighbour list is known to stay valid (the loop condition tests the
-        coming step's drift against the skin), so the step carries it unchanged; each run ends
-        with one step that rebuilds. Without the per-step ``lax.cond`` XLA updates the pair
-        arrays in place instead of copying the neighbour indices and springs every step
-        (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
-        the trajectory, are those of :func:`step`.
-        """
-        # the carry holds the coming step's drift, computed once: the loop condition tests it
-        # against the skin and the step goes on from it
-        def advance(c, pairs):
-            st, k, d = c
-            new = step(st, pairs, d)[0]
-            return new, k + 1, drift(new)
-
-        def go_on(c):
-            st, k, d = c
-            return (k < n_steps) & ~needs_rebuild(st, d[2])
-
-        def segment(c):
-            c = jax.lax.while_loop(go_on, lambda c: advance(c, "keep"), c)
-            return jax.lax.cond(c[1] < n_steps, lambda c: advance(c, "rebuild"), lambda c: c, c)
-
-        k0 = jnp.zeros_like(jnp.asarray(n_steps))
-        return jax.lax.while_loop(lambda c: c[1] < n_steps, segment,
-                                  (state, k0, drift(state)))[0]
-
+    forces = make_contact_forces(
+        pair_kernel, particles, walls, params, batch_axis=batch_axis, dim=dim, dt=dt,
+        dtype=dtype, gravity=gravity, displacement=neighbor.displacement, rotation=rotation,
+        conduction=conduction, conduction_gap=(gap_pp, gap_pw), periodic_length=periodic_length)
+    step, run_steps, energies = _velocity_verlet(
+        forces, neighbor, dt=dt, skin=skin, periodic_length=periodic_length, rotation=rotation,
+        always_rebuild=always_rebuild, batch_axis=batch_axis, external_force=external_force,
+        conduction=conduction, extra_update=extra_update, boundary_update=boundary_update)
     diag = jax.jit(partial(_chunk_diagnostics, lo=dom_lo, hi=dom_hi, periodic_axis=periodic_axis))
     return DEM(
         dt=dt, t_crit=t_crit, m_min=m_min, k_max=k_max, dim=dim, walls=walls,

@@ -179,16 +179,19 @@ class DEMMotion(AbstractMotion):
     def cost(self, state) -> dict:
         """The run's step counts and its wall time estimated from a timed warm-up of
         :data:`WARMUP_STEPS` steps from ``state`` (after one compiling call), plus the host-side
-        work of a chunk (observation and check) times the number of chunks."""
+        work of a chunk (observation and check, also timed after a compiling call) times the
+        number of chunks."""
         n = self.mechanical_steps()
         k = max(1, min(WARMUP_STEPS, n))
         jax.block_until_ready(self.dem.run_steps(state, k))  # compiles
         t0 = time.perf_counter()
         end = jax.block_until_ready(self.dem.run_steps(state, k))
         per_step = (time.perf_counter() - t0) / k
+        jax.device_get(self.observe(end))  # compiles what an output and a check run
+        self.dem._diag(end)
         t0 = time.perf_counter()
         jax.device_get(self.observe(end))
-        self.dem._diag(end)
+        jax.block_until_ready(self.dem._diag(end))
         per_chunk = time.perf_counter() - t0
         self._cost_model = (per_step, per_chunk)
         chunks = len(self.times) - 1

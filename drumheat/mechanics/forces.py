@@ -1,0 +1,401 @@
+"""The contact forces of a DEM step behind one signature: the JAX kernel and the C++ loop.
+
+:func:`make_contact_forces` returns a :class:`ContactForces` object; calling it with the
+positions, the half-step velocities and spins, the time, the neighbour list and the tangential
+springs gives a :class:`ForceResult` (forces and torques with gravity, updated springs, the
+:class:`Contacts` of the step for the heat model, the largest relative overlap and, with
+per-step conduction, the heat flows). Two implementations of the same contact law
+(:func:`drumheat.mechanics.contact_forces.contact_law`):
+
+- :class:`JaxContactForces`: JAX operations (every platform, ``vmap``, any material table);
+- :class:`CpuContactForces`: pairs and walls in one C++ loop on XLA's CPU threads
+  (:mod:`drumheat.mechanics.cpu_kernel`), the wall geometry from JAX.
+
+They are tested equal to round-off (tests/test_cpu_kernel.py). The velocity-Verlet step of
+:func:`drumheat.mechanics.make_dem` calls one of them once per step.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from drumheat.geometry.walls import rpm_to_omega
+from drumheat.mechanics.conduction import PairConduction
+from drumheat.mechanics.conduction import heat_flow as pair_heat_flow
+from drumheat.mechanics.contact_forces import (
+    ContactParams,
+    contact_law,
+    cross_a_f,
+    cross_w_a,
+    rolling_torque,
+)
+
+__all__ = ["Contacts", "ForceResult", "ContactForces", "JaxContactForces", "CpuContactForces",
+           "make_contact_forces"]
+
+
+class Contacts(NamedTuple):
+    """Contacts of the current step as fixed-size padded arrays (for the heat model).
+
+    Particle-particle (length = neighbour capacity M): ``pair_i < pair_j`` (padding = N),
+    ``pair_mask`` true for touching pairs, each contact once; ``pair_overlap`` (m),
+    ``pair_distance`` centre distance L (m, the thermal-pipe length of Weigler digest [2.5]),
+    ``pair_normal_force`` (N).
+    Particle-wall (length N*W, row-major over (particle, wall primitive)): ``wall_particle``,
+    ``wall_index`` (primitive index into the wall tuple), ``wall_id`` (the walls' labels),
+    ``wall_mask``, ``wall_overlap`` (m), ``wall_normal_force`` (N).
+    ``pair_conducts`` / ``wall_conducts``: the contacts that conduct heat, those that overlap or
+    whose surface gap is within the conduction gap tolerance (``make_dem(conduction_gap=...)``;
+    without one they equal the masks).
+    Always multiply by the masks: padded entries hold index N (pairs) and zeros.
+    """
+
+    pair_i: jax.Array
+    pair_j: jax.Array
+    pair_mask: jax.Array
+    pair_overlap: jax.Array
+    pair_distance: jax.Array
+    pair_normal_force: jax.Array
+    wall_particle: jax.Array
+    wall_index: jax.Array
+    wall_id: jax.Array
+    wall_mask: jax.Array
+    wall_overlap: jax.Array
+    wall_normal_force: jax.Array
+    pair_conducts: jax.Array
+    wall_conducts: jax.Array
+
+
+class ForceResult(NamedTuple):
+    """What :class:`ContactForces` returns for one step.
+
+    force (N, dim) N and torque (N,) / (N, 3) N m: contacts and gravity; pair_spring
+    (capacity, dim) and wall_spring (N, W, dim) m: the updated tangential springs; contacts:
+    :class:`Contacts`; max_overlap: largest overlap / smaller radius of the step; heat (N,) W:
+    the per-step pair conduction (None without it).
+    """
+
+    force: jax.Array
+    torque: jax.Array
+    pair_spring: jax.Array
+    wall_spring: jax.Array
+    contacts: Contacts
+    max_overlap: jax.Array
+    heat: Optional[jax.Array]
+
+
+def _materialize(tree, pred):
+    """Return ``tree`` unchanged but computed once, before its consumers run.
+
+    XLA:CPU removes ``optimization_barrier`` before fusion, and its fusion heuristics then fuse
+    the contact law into the concatenation of the scatter update, recomputing it for each of
+    the output columns (measured: half of the force kernel). A conditional on a runtime
+    predicate is a fusion boundary that XLA cannot remove; ``pred`` must always be true at
+    run time (the other branch, never taken, returns zeros so that the branches differ).
+    """
+    return jax.lax.cond(pred, lambda t: t,
+                        lambda t: jax.tree_util.tree_map(jnp.zeros_like, t), tree)
+
+
+class ContactForces:
+    """Contact forces of particles and walls, one call per step (build with
+    :func:`make_contact_forces`).
+
+    Subclasses implement :meth:`_contacts`; this class holds the constants both share (particle
+    arrays in the mechanics dtype, contact tables, walls, gravity, the conduction gap) and the
+    parts that are JAX in both (wall geometry, the conduction-gap masks, the wall slots of
+    :class:`Contacts`, the elastic energy).
+    """
+
+    def __init__(self, particles, walls, params: ContactParams, *, dim: int, dt: float, dtype,
+                 gravity, displacement, rotation: bool, conduction: PairConduction | None,
+                 conduction_gap: tuple[float, float], periodic_length=None):
+        self.n, self.dim, self.walls, self.n_w = particles.n, dim, tuple(walls), len(walls)
+        self.params, self.dtype, self.rotation = params, dtype, rotation
+        self.radius = particles.radius.astype(dtype)
+        self.mass = particles.mass.astype(dtype)
+        self.inertia = particles.inertia.astype(dtype)
+        self.ptype = particles.ptype
+        self.radius_thermal = particles.radius  # the conduction's own precision
+        self.single_type = params.n_types == 1
+        self.use_rolling = params.uses_rolling()
+        self.g_vec = jnp.asarray(gravity, dtype)
+        self.displacement = displacement
+        self.wall_ids = np.array([w.wall_id for w in self.walls], dtype=np.int32)
+        self.wall_omega = [rpm_to_omega(getattr(w, "rpm", 0.0)) for w in self.walls]
+        self.dt, self.dt_c = dt, jnp.asarray(dt, dtype)
+        self.conduction = conduction
+        self.gap_pp, self.gap_pw = conduction_gap
+        self.periodic_length = periodic_length
+
+    # -- the one signature ---------------------------------------------------------------------
+    def __call__(self, pos, vel, w, t, nbrs, pair_spring, wall_spring,
+                 temperature=None) -> ForceResult:
+        """Forces and torques at ``pos`` with the velocities ``vel``, ``w`` (the half-step ones
+        in the Verlet step: the dashpots and the spring increment use them, as LIGGGHTS does).
+        ``temperature`` (N,) K: for the per-step pair conduction, if the system has one."""
+        force = self.mass[:, None] * self.g_vec
+        torque = jnp.zeros_like(w)
+        return self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
+                              temperature)
+
+    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
+                  temperature) -> ForceResult:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # -- shared parts --------------------------------------------------------------------------
+    def table(self, tab, a, b):
+        """Particle-particle table entries of the type pairs (a, b)."""
+        tab = tab.astype(self.dtype)
+        return tab[0, 0] if self.single_type else tab[a, b]
+
+    def wall_table(self, tab):
+        """Particle-wall table as (N or 1, W)."""
+        tab = jnp.broadcast_to(tab.astype(self.dtype), (self.params.n_types, self.n_w))
+        return tab[0][None, :] if self.single_type else tab[self.ptype]
+
+    def wall_geometry(self, pos, t):
+        """Distance (N, W), unit normal towards the particle and wall velocity (N, W, dim)."""
+        n, dim, dtype = self.n, self.dim, self.dtype
+        if self.n_w == 0:
+            return (jnp.zeros((n, 0), dtype), jnp.zeros((n, 0, dim), dtype),
+                    jnp.zeros((n, 0, dim), dtype))
+        evs = [wl.evaluate(pos, t) for wl in self.walls]
+        return tuple(jnp.stack([e[k] for e in evs], axis=1).astype(dtype) for k in range(3))
+
+    def pair_gap_mask(self, pos, i, j):
+        """Neighbour pairs within the conduction gap (``conduction_gap``), from the positions."""
+        valid = i < self.n
+        ii, jj = jnp.where(valid, i, 0), jnp.where(valid, j, 0)
+        d = self.displacement(pos[jj], pos[ii])
+        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        ri, rj = self.radius[ii], self.radius[jj]
+        return valid & (ri + rj - dist >= -self.gap_pp * 2.0 * jnp.minimum(ri, rj))
+
+    def wall_gap_mask(self, wd, w_mask):
+        """Particle-wall slots within the conduction gap, flattened like ``wall_mask``."""
+        if self.n_w == 0 or self.gap_pw == 0:
+            return w_mask
+        r_ = self.radius[:, None]
+        return ((r_ - wd) >= -self.gap_pw * 2.0 * r_).reshape(-1)
+
+    def wall_slots(self, wact, wovl, wfn):
+        """The wall fields of :class:`Contacts`, flattened over the (N, W) slots."""
+        n, n_w = self.n, self.n_w
+        if n_w == 0:
+            empty = jnp.zeros((0,), jnp.int32)
+            return (empty, empty, empty, jnp.zeros((0,), bool), jnp.zeros((0,), self.dtype),
+                    jnp.zeros((0,), self.dtype))
+        w_part = jnp.repeat(jnp.arange(n, dtype=jnp.int32), n_w)
+        w_idx = jnp.tile(jnp.arange(n_w, dtype=jnp.int32), n)
+        w_id = jnp.tile(jnp.asarray(self.wall_ids), n)
+        return (w_part, w_idx, w_id, wact.reshape(-1), jnp.where(wact, wovl, 0.0).reshape(-1),
+                wfn.reshape(-1))
+
+    def elastic_energy(self, c: Contacts, pair_spring, wall_spring):
+        """Energy in the normal and tangential springs of the touching contacts ``c``, J:
+        ``k_n delta^2 / 2 + k_t |xi|^2 / 2`` summed."""
+        ptype, n, n_w = self.ptype, self.n, self.n_w
+        i = jnp.where(c.pair_mask, c.pair_i, 0)
+        j = jnp.where(c.pair_mask, c.pair_j, 0)
+        kn = self.table(self.params.kn_pp, ptype[i], ptype[j])
+        kt = self.table(self.params.kt_pp, ptype[i], ptype[j])
+        el = 0.5 * jnp.sum(jnp.where(c.pair_mask, kn * c.pair_overlap**2
+                                     + kt * jnp.sum(pair_spring**2, -1), 0.0))
+        if n_w > 0:
+            knw = jnp.broadcast_to(self.wall_table(self.params.kn_pw), (n, n_w)).reshape(-1)
+            ktw = jnp.broadcast_to(self.wall_table(self.params.kt_pw), (n, n_w)).reshape(-1)
+            xi2 = jnp.sum(wall_spring**2, -1).reshape(-1)
+            el = el + 0.5 * jnp.sum(jnp.where(c.wall_mask, knw * c.wall_overlap**2 + ktw * xi2,
+                                              0.0))
+        return el
+
+
+class JaxContactForces(ContactForces):
+    """The contact law in JAX operations: pairs through the neighbour list (a gather, the law,
+    one scatter of forces and torques), walls as an (N, W) block."""
+
+    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
+                  temperature) -> ForceResult:
+        n, gap_pp, radius = self.n, self.gap_pp, self.radius
+        i, j = nbrs.idx[0], nbrs.idx[1]
+        force, torque, new_spring, ovl, dist, fn, active, max_ovl = self._pairs(
+            pos, vel, w, nbrs, pair_spring, force, torque, i, j)
+        pair_dist = dist  # every pair's, for the conduction gap tolerance (heat_flow)
+        p_cond = active
+        if gap_pp > 0:
+            r_i, r_j = radius[jnp.where(i < n, i, 0)], radius[jnp.where(j < n, j, 0)]
+            p_cond = (i < n) & (ovl >= -gap_pp * 2.0 * jnp.minimum(r_i, r_j))
+        ovl = jnp.where(active, ovl, 0.0)
+        dist = jnp.where(active, dist, 0.0)
+        force, torque, new_wall_spring, max_ovl, slots, wd = self._walls(
+            pos, vel, w, t, wall_spring, force, torque, max_ovl)
+        w_part, w_idx, w_id, w_mask, w_ovl, w_fn = slots
+        contacts = Contacts(
+            pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
+            pair_normal_force=fn, wall_particle=w_part, wall_index=w_idx, wall_id=w_id,
+            wall_mask=w_mask, wall_overlap=w_ovl, wall_normal_force=w_fn, pair_conducts=p_cond,
+            wall_conducts=self.wall_gap_mask(wd, w_mask))
+        heat = None
+        c = self.conduction
+        if c is not None and temperature is not None:
+            heat = pair_heat_flow(temperature, contacts, self.radius_thermal, c.law,
+                                  c.coefficient, c.gap_tolerance, pair_dist)
+        return ForceResult(force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat)
+
+    def _pairs(self, pos, vel, w, nbrs, pair_spring, force, torque, i, j):
+        n, dim, params, table = self.n, self.dim, self.params, self.table
+        radius, mass, inertia, ptype = self.radius, self.mass, self.inertia, self.ptype
+        valid = i < n
+        ii = jnp.where(valid, i, 0)
+        jj = jnp.where(valid, j, 0)
+        d = self.displacement(pos[jj], pos[ii])  # from i to j
+        dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
+        dist_safe = jnp.where(valid & (dist > 0), dist, 1.0)
+        nrm = d / dist_safe[:, None]
+        ri = radius[ii]
+        rj = radius[jj]
+        ovl = ri + rj - dist
+        active = valid & (ovl > 0)
+        a_i = (ri - 0.5 * ovl)[:, None] * nrm
+        a_j = -(rj - 0.5 * ovl)[:, None] * nrm
+        wi = w[ii]
+        wj = w[jj]
+        v_rel = (vel[jj] + cross_w_a(wj, a_j)) - (vel[ii] + cross_w_a(wi, a_i))
+        mi = mass[ii]
+        mj = mass[jj]
+        m_eff = mi * mj / (mi + mj)
+        ti = ptype[ii]
+        tj = ptype[jj]
+        res = contact_law(nrm, ovl, v_rel, m_eff,
+                          table(params.kn_pp, ti, tj), table(params.kt_pp, ti, tj),
+                          table(params.zeta_n_pp, ti, tj), table(params.zeta_t_pp, ti, tj),
+                          table(params.mu_pp, ti, tj), pair_spring, self.dt_c, active)
+        f = res.force
+        seg = jnp.concatenate([i, j])  # padding N is dropped by segment_sum
+        if not self.rotation:
+            force = force + jax.ops.segment_sum(jnp.concatenate([-f, f]), seg, n)
+        else:
+            tq_i = cross_a_f(a_i, -f)
+            tq_j = cross_a_f(a_j, f)
+            if self.use_rolling:
+                r_eff = ri * rj / (ri + rj)
+                ii_ = inertia[ii]
+                ij_ = inertia[jj]
+                m_r = rolling_torque(wj - wi, res.normal_force, r_eff,
+                                     table(params.mu_roll_pp, ti, tj), ii_ * ij_ / (ii_ + ij_),
+                                     self.dt_c)
+                m_r = jnp.where(active[:, None] if m_r.ndim == 2 else active, m_r, 0.0)
+                tq_j = tq_j + m_r
+                tq_i = tq_i - m_r
+            # forces and torques in one scatter (the same additions in the same order as two
+            # scatters); the barrier keeps XLA from fusing the contact law into the
+            # concatenation, where it would be recomputed once per output column
+            tcol = (lambda a: a[:, None]) if tq_i.ndim == 1 else (lambda a: a)
+            f, tq_i, tq_j = _materialize((f, tq_i, tq_j), i[0] <= n)
+            upd = jnp.concatenate([jnp.concatenate([-f, tcol(tq_i)], axis=1),
+                                   jnp.concatenate([f, tcol(tq_j)], axis=1)])
+            tot = jax.ops.segment_sum(upd, seg, n)
+            force = force + tot[:, :dim]
+            torque = torque + (tot[:, dim] if tq_i.ndim == 1 else tot[:, dim:])
+        rmin_pair = jnp.minimum(ri, rj)
+        max_ovl = jnp.max(jnp.where(active, ovl / rmin_pair, 0.0), initial=0.0)
+        return force, torque, res.spring, ovl, dist, res.normal_force, active, max_ovl
+
+    def _walls(self, pos, vel, w, t, wall_spring, force, torque, max_ovl):
+        if self.n_w == 0:
+            return (force, torque, wall_spring, max_ovl, self.wall_slots(None, None, None),
+                    jnp.zeros((self.n, 0), self.dtype))
+        dim, dtype, params, wall_table = self.dim, self.dtype, self.params, self.wall_table
+        radius, mass, inertia = self.radius, self.mass, self.inertia
+        wd, wn, wv = self.wall_geometry(pos, t)
+        r_ = radius[:, None]
+        wovl = r_ - wd
+        wact = wovl > 0
+        a = -(r_ - 0.5 * wovl)[..., None] * wn
+        v_relw = vel[:, None, :] + cross_w_a(w[:, None], a) - wv
+        m_w = jnp.broadcast_to(mass[:, None], wd.shape)
+        resw = contact_law(wn, wovl, v_relw, m_w,
+                           wall_table(params.kn_pw), wall_table(params.kt_pw),
+                           wall_table(params.zeta_n_pw), wall_table(params.zeta_t_pw),
+                           wall_table(params.mu_pw), wall_spring, self.dt_c, wact)
+        force = force + jnp.sum(resw.force, axis=1)
+        if self.rotation:
+            tq = cross_a_f(a, resw.force)
+            if self.use_rolling:
+                if dim == 2:
+                    w_wall = jnp.asarray(self.wall_omega, dtype)[None, :]
+                    w_rel = w[:, None] - w_wall
+                else:
+                    w_wall = jnp.zeros((self.n_w, 3), dtype).at[:, 2].set(
+                        jnp.asarray(self.wall_omega, dtype))
+                    w_rel = w[:, None, :] - w_wall[None]
+                m_r = rolling_torque(w_rel, resw.normal_force, r_,
+                                     wall_table(params.mu_roll_pw), inertia[:, None], self.dt_c)
+                m_r = jnp.where(wact[..., None] if m_r.ndim == 3 else wact, m_r, 0.0)
+                tq = tq + m_r
+            torque = torque + jnp.sum(tq, axis=1)
+        max_ovl = jnp.maximum(max_ovl, jnp.max(jnp.where(wact, wovl / r_, 0.0)))
+        return (force, torque, resw.spring, max_ovl,
+                self.wall_slots(wact, wovl, resw.normal_force), wd)
+
+
+class CpuContactForces(ContactForces):
+    """Pairs and walls in one C++ loop (:mod:`drumheat.mechanics.cpu_kernel`), the wall
+    geometry from JAX; the kernel's per-slot outputs are already zero where nothing touches."""
+
+    def __init__(self, *args, batch_axis=None, **kw):
+        super().__init__(*args, **kw)
+        import drumheat.mechanics.cpu_kernel as cpu_kernel
+
+        cpu_kernel.check_supported(self.dim, self.params, self.dtype, batch_axis)
+        cpu_kernel.load()
+        self._kernel = cpu_kernel
+        # the C++ kernel's contact tables, wall spins, dt, period and rotation flag
+        self._kernel_params = cpu_kernel.kernel_params(
+            self.params, self.n_w, self.dtype, self.dt, self.wall_omega, self.periodic_length,
+            self.rotation)
+
+    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
+                  temperature) -> ForceResult:
+        i, j = nbrs.idx[0], nbrs.idx[1]
+        wd, wn, wv = self.wall_geometry(pos, t)
+        heat_args = {}
+        c = self.conduction
+        if c is not None and temperature is not None:
+            heat_args = dict(temperature=temperature, conduction_law=c.law,
+                             conduction_h=c.coefficient, gap_tolerance=c.gap_tolerance)
+        (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx,
+         heat) = self._kernel.contacts(pos, vel, w, self.radius, self.mass, self.inertia,
+                                       self.ptype, nbrs.idx, pair_spring, wd, wn, wv,
+                                       wall_spring, **self._kernel_params, **heat_args)
+        active = ovl > 0
+        w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
+        p_cond = active
+        if self.gap_pp > 0:  # the kernel leaves dist zero where nothing touches
+            p_cond = self.pair_gap_mask(pos, i, j)
+        contacts = Contacts(
+            pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
+            pair_normal_force=fn, wall_particle=w_part, wall_index=w_idx, wall_id=w_id,
+            wall_mask=w_mask, wall_overlap=w_ovl, wall_normal_force=w_fn, pair_conducts=p_cond,
+            wall_conducts=self.wall_gap_mask(wd, w_mask))
+        if c is None or temperature is None:
+            heat = None
+        return ForceResult(force + fk, torque + tk, new_spring, new_wall_spring, contacts,
+                           mx[0], heat)
+
+
+def make_contact_forces(backend: str, particles, walls, params: ContactParams, *,
+                        batch_axis=None, **kw) -> ContactForces:
+    """The :class:`ContactForces` of ``backend`` (``"jax"`` or ``"cpu"``); ``kw`` as
+    :class:`ContactForces` takes them. ``"cpu"`` checks that the C++ loop serves (dimension,
+    dtype, not under ``vmap``) and compiles it on first use."""
+    if backend == "cpu":
+        return CpuContactForces(particles, walls, params, batch_axis=batch_axis, **kw)
+    if backend == "jax":
+        return JaxContactForces(particles, walls, params, **kw)
+    raise ValueError(f"pair_kernel must be 'jax' or 'cpu', got {backend!r}")
