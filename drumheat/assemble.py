@@ -294,7 +294,7 @@ class DEMSetup(NamedTuple):
     k_n: normal stiffness, N/m; t_crit: critical step, s; dt: the step asked for (``dem.dt``,
     else the smaller of ``safety_factor x t_crit`` and the explicit limit of the tangential
     dashpots, :meth:`ContactParams.dashpot_time_step`), s, before a motion model fits it to
-    its intervals (:func:`fit_time_step`); dtype of the mechanics; gravity vector, m/s2; density (N,), kg/m3.
+    its intervals (:func:`fit_time_step`); dt_origin: which of these set it; dtype of the mechanics; gravity vector, m/s2; density (N,), kg/m3.
     """
 
     particles: Particles
@@ -302,6 +302,7 @@ class DEMSetup(NamedTuple):
     k_n: float
     t_crit: float
     dt: float
+    dt_origin: str
     dtype: Any
     gravity: np.ndarray
     density: np.ndarray
@@ -321,12 +322,14 @@ def dem_setup(scene: Scene) -> DEMSetup:
     gravity = np.zeros(scene.dim)
     gravity[1] = -cfg.gravity
     particles = mechanical_particles(0.5 * d, density, group=group)
-    dt = cfg.dt
+    dt, dt_origin = cfg.dt, "dem.dt"
     if dt is None:
-        dt = min(cfg.safety_factor * t_crit,
-                 params.dashpot_time_step(float(np.min(np.asarray(particles.mass)))))
+        dt, dt_origin = cfg.safety_factor * t_crit, "dem.safety_factor x t_crit"
+        dashpot = params.dashpot_time_step(float(np.min(np.asarray(particles.mass))))
+        if dashpot < dt:
+            dt, dt_origin = dashpot, "the explicit limit of the tangential dashpots"
     return DEMSetup(
-        particles=particles, params=params, k_n=k_n, t_crit=t_crit, dt=dt,
+        particles=particles, params=params, k_n=k_n, t_crit=t_crit, dt=dt, dt_origin=dt_origin,
         dtype=jnp.float32 if cfg.precision == "float32" else jnp.float64, gravity=gravity,
         density=density, conduction_gap=conduction_gaps(scene))
 

@@ -155,3 +155,17 @@ def test_builtin_dem_scenes_load_and_build():
         bed = make_motion(load_scene(name))
         assert bed.dt <= 0.2 * bed.t_crit * (1 + 1e-9)
         assert bed.steps_per_output * bed.dt == pytest.approx(bed.scene.run.output_interval)
+
+
+def test_summary_says_what_set_the_time_step():
+    """weigler-mixed (damping 0.3): the dashpot limit, 0.079 t_crit, is below 0.1 t_crit; a
+    smaller safety factor or a given dt set the step themselves."""
+    for over, origin, ratio in (({}, "tangential dashpots", 0.0786),
+                                ({"dem.safety_factor": 0.05}, "safety_factor", 0.05),
+                                ({"dem.dt": 5e-6}, "dem.dt", None)):
+        motion = make_motion(load_scene("weigler-mixed", over))
+        info = motion.backend_info()["time_step"]
+        assert origin in info["set_by"]
+        assert info["dt_s"] == motion.dt and info["t_crit_s"] == motion.t_crit
+        if ratio is not None:  # fitted to the recording interval: at most the limit
+            assert ratio * 0.999 < info["dt_over_t_crit"] <= ratio * 1.0001

@@ -61,12 +61,15 @@ class DEMMotion(AbstractMotion):
         return self._backend
 
     def backend_info(self) -> dict:
-        """What summary.json says about the contact kernel of the run."""
+        """What summary.json says about the contact kernel and the time step of the run."""
         choice = self.contact_backend()
         info = {"contact_backend": choice.backend}
         if choice.reason is not None:
             info["contact_backend_note"] = (f"'{choice.requested}' asked for; "
                                             f"{choice.reason}")
+        info["time_step"] = {"dt_s": self.dt, "t_crit_s": self.t_crit,
+                             "dt_over_t_crit": self.dt / self.t_crit,
+                             "set_by": self.setup.dt_origin}
         return info
 
     # -- per-particle mechanics in the outputs ----------------------------------------------------
