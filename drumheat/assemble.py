@@ -294,7 +294,8 @@ class DEMSetup(NamedTuple):
     k_n: normal stiffness, N/m; t_crit: critical step, s; dt: the step asked for (``dem.dt``,
     else the smaller of ``safety_factor x t_crit`` and the explicit limit of the tangential
     dashpots, :meth:`ContactParams.dashpot_time_step`), s, before a motion model fits it to
-    its intervals (:func:`fit_time_step`); dt_origin: which of these set it; dtype of the mechanics; gravity vector, m/s2; density (N,), kg/m3.
+    its intervals (:func:`fit_time_step`); dt_origin: which of these set it; dtype of the
+    mechanics; gravity vector, m/s2; density (N,), kg/m3.
     """
 
     particles: Particles

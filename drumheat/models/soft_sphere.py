@@ -39,8 +39,9 @@ def critical_time_step(m_min, k_max):
 def dashpot_time_step(m_min, gamma_pair, gamma_wall, contacts=STICKING_CONTACTS):
     """Largest time step at which the tangential dashpots keep a particle's spin stable (s).
 
-    The velocity-Verlet step evaluates the dashpots with the half-step velocities, i.e.
-    explicitly: a velocity damped at the rate ``lambda`` (``dv/dt = -lambda v``) is updated as
+    Derived here from drumheat's integrator (no reference digest covers it). The velocity-
+    Verlet step evaluates the dashpots with the half-step velocities, i.e. explicitly: a
+    velocity damped at the rate ``lambda`` (``dv/dt = -lambda v``) is updated as
     ``v <- (1 - lambda dt) v``, which alternates in sign for ``lambda dt > 1`` and grows for
     ``lambda dt > 2`` (with the spring as well, the leapfrog amplification matrix has
     determinant ``1 - lambda dt``: stable while ``lambda dt < 2`` and ``omega dt < 2``).

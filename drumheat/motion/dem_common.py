@@ -13,7 +13,6 @@ import functools
 import time
 
 import jax
-
 import numpy as np
 
 from drumheat.mechanics import DEMError, DEMState
