@@ -13,6 +13,10 @@ from drumheat.models import drag
 from drumheat.results.result import energy_balance
 from drumheat.runner import simulate
 from drumheat.scene import SceneError, load_scene, scene_from_dict
+
+# the steps given here are above the tangential dashpots' limit on purpose (these tests are about
+# heat and the run loop, not about the forces of sticking contacts)
+pytestmark = pytest.mark.filterwarnings("ignore::drumheat.mechanics.DEMAccuracyWarning")
 from drumheat.thermal.convection import _air_clipped, nusselt_alpha
 
 T_GAS = 293.15

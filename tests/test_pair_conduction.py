@@ -14,6 +14,10 @@ from drumheat.mechanics import contact_params, make_dem, make_particles
 from drumheat.mechanics.conduction import PairConduction, pair_conductance
 from drumheat.mechanics.integrator import wrap_periodic_axis
 
+# the steps given here are above the tangential dashpots' limit on purpose (these tests are about
+# heat and the run loop, not about the forces of sticking contacts)
+pytestmark = pytest.mark.filterwarnings("ignore::drumheat.mechanics.DEMAccuracyWarning")
+
 
 def _pair(law, h, r1=0.004, r2=0.003, overlap=1e-4, T=(300.0, 350.0)):
     """Two touching spheres at rest, no gravity, no walls, one step."""
