@@ -110,6 +110,63 @@ def _props(scene):
     return d, lam, eps, rho, c, T0, spread
 
 
+def _radiation_term(scene, eff, eps, T0, T_wall, Tg, frac_wall, A_s, *, seen_by_wall_layer,
+                    drum_bed) -> Term:
+    """The radiation term: the scene's own effect, or an estimate against a black surrounding
+    at the wall (or gas) temperature seen by part of the bed (only the particles at the tubes in
+    a hopper, ``seen_by_wall_layer``); ``A_s`` the particle surface, m2."""
+    if "radiation" in eff:
+        r = eff["radiation"]
+        Tr = float(np.asarray(r.sink_temperature)[0])
+        e = float(np.asarray(r.emissivity)[0])
+        note = f"eps = {e:.2g}, T_rad = {Tr:.1f} K"
+        seen = 1.0
+    else:
+        Tr = T_wall if T_wall is not None else (Tg if Tg is not None else T0)
+        e = eps
+        # in a drum bed only the particles at the wall and at the free surface see the
+        # surroundings (about twice the wall-contact fraction); elsewhere an upper bound
+        # (a hopper: only the particles at the tubes see a surface at another temperature)
+        if seen_by_wall_layer:
+            seen = frac_wall
+        elif drum_bed or frac_wall > 0:
+            seen = min(1.0, 2.0 * frac_wall)
+        else:
+            seen = 1.0
+        note = (f"estimate: black surrounding at {Tr:.1f} K, eps = {e:.2g}, "
+                + (f"{seen:.0%} of the particles see it" if seen < 1.0 else
+                   "every particle sees it (upper bound)"))
+    h_r = e * SIGMA * (T0**2 + Tr**2) * (T0 + Tr)
+    return Term("radiation", "[heat.radiation]", scene.heat.radiation is not None,
+                h_r * A_s * seen, Tr - T0, note + f", h_r = {h_r:.3g} W/(m2 K)")
+
+
+def _grade(terms, contact, scene, model) -> None:
+    """Each term's size relative to the largest and its verdict (keep, could be dropped,
+    should be added, ...), set on the terms."""
+    big = max(t.heat_flow for t in terms) or 1.0
+    loss = scene.heat.loss is not None
+    C = float(np.mean(np.asarray(model.particles.capacity)))
+    duration = float(scene.run.duration)
+    for t in terms:
+        t.relative = t.heat_flow / big
+        exposure = t.conductance * duration / C  # fraction of an e-folding over the run
+        if t.included:
+            if t.relative >= 0.01:
+                t.verdict = "keep"
+            elif t is not contact and exposure >= 0.05:
+                t.verdict = (f"keep (small now, but acts over the run: G t_run/(m c) = "
+                             f"{exposure:.2g})")
+            else:
+                t.verdict = "could be dropped (< 1 % of the largest)"
+        elif loss and t.name in ("convection", "radiation"):
+            t.verdict = "covered by [heat.loss]"
+        elif t.conductance == 0 or t.relative < 0.05:
+            t.verdict = "negligible (absent: fine)"
+        else:
+            t.verdict = "should be added (> 5 % of the largest)"
+
+
 def explain(scene) -> Advice:
     """Sizes of all effects for ``scene`` (a Scene, a built-in name or a path)."""
     if not isinstance(scene, Scene):
@@ -199,31 +256,8 @@ def explain(scene) -> Advice:
             note = f"estimate: conduction limit Nu = 2, alpha = {a:.3g} W/(m2 K)"
         terms.append(Term("convection", "[heat.convection]", scene.heat.convection is not None,
                           a * A_s, Tg - T0, note))
-    # radiation
-    if "radiation" in eff:
-        r = eff["radiation"]
-        Tr = float(np.asarray(r.sink_temperature)[0])
-        e = float(np.asarray(r.emissivity)[0])
-        note = f"eps = {e:.2g}, T_rad = {Tr:.1f} K"
-        seen = 1.0
-    else:
-        Tr = T_wall if T_wall is not None else (Tg if Tg is not None else T0)
-        e = eps
-        # in a drum bed only the particles at the wall and at the free surface see the
-        # surroundings (about twice the wall-contact fraction); elsewhere an upper bound
-        # (a hopper: only the particles at the tubes see a surface at another temperature)
-        if moving_bed:
-            seen = frac_wall
-        elif drum_bed or frac_wall > 0:
-            seen = min(1.0, 2.0 * frac_wall)
-        else:
-            seen = 1.0
-        note = (f"estimate: black surrounding at {Tr:.1f} K, eps = {e:.2g}, "
-                + (f"{seen:.0%} of the particles see it" if seen < 1.0 else
-                   "every particle sees it (upper bound)"))
-    h_r = e * SIGMA * (T0**2 + Tr**2) * (T0 + Tr)
-    terms.append(Term("radiation", "[heat.radiation]", scene.heat.radiation is not None,
-                      h_r * A_s * seen, Tr - T0, note + f", h_r = {h_r:.3g} W/(m2 K)"))
+    terms.append(_radiation_term(scene, eff, eps, T0, T_wall, Tg, frac_wall, A_s,
+                                 seen_by_wall_layer=moving_bed, drum_bed=drum_bed))
     # heat brought in or taken out at the boundary must pass the contacts: their driving
     # difference is at least the external one (a wall-heated bed starts uniform)
     if contact.conductance > 0:
@@ -233,28 +267,7 @@ def explain(scene) -> Advice:
             contact.note += (f"; dT = the external driving difference (initial spread "
                              f"{spread:.3g} K)")
 
-    # relative sizes and verdicts
-    big = max(t.heat_flow for t in terms) or 1.0
-    loss = scene.heat.loss is not None
-    C = float(np.mean(np.asarray(model.particles.capacity)))
-    duration = float(scene.run.duration)
-    for t in terms:
-        t.relative = t.heat_flow / big
-        exposure = t.conductance * duration / C  # fraction of an e-folding over the run
-        if t.included:
-            if t.relative >= 0.01:
-                t.verdict = "keep"
-            elif t is not contact and exposure >= 0.05:
-                t.verdict = (f"keep (small now, but acts over the run: G t_run/(m c) = "
-                             f"{exposure:.2g})")
-            else:
-                t.verdict = "could be dropped (< 1 % of the largest)"
-        elif loss and t.name in ("convection", "radiation"):
-            t.verdict = "covered by [heat.loss]"
-        elif t.conductance == 0 or t.relative < 0.05:
-            t.verdict = "negligible (absent: fine)"
-        else:
-            t.verdict = "should be added (> 5 % of the largest)"
+    _grade(terms, contact, scene, model)
     # Biot number: all surface exchange of included effects per particle surface
     G_in = sum(t.conductance for t in terms if t.included)
     h = G_in / A_s
