@@ -25,6 +25,7 @@ from drumheat.materials import material
 from drumheat.mechanics import ContactParams, Particles, contact_params
 from drumheat.mechanics import make_particles as mechanical_particles
 from drumheat.mechanics.deposition import Packing, deposit_2d
+from drumheat.models.soft_sphere import default_time_step
 from drumheat.scene import Scene, SceneError
 from drumheat.scene.rules import dem_critical_time_step, dem_stiffness
 from drumheat.thermal.effect import EffectContext, GasState, PlugFlow, TableValues
@@ -325,10 +326,11 @@ def dem_setup(scene: Scene) -> DEMSetup:
     particles = mechanical_particles(0.5 * d, density, group=group)
     dt, dt_origin = cfg.dt, "dem.dt"
     if dt is None:
-        dt, dt_origin = cfg.safety_factor * t_crit, "dem.safety_factor x t_crit"
-        dashpot = params.dashpot_time_step(float(np.min(np.asarray(particles.mass))))
-        if dashpot < dt:
-            dt, dt_origin = dashpot, "the explicit limit of the tangential dashpots"
+        dt, by_dashpot = default_time_step(
+            t_crit, cfg.safety_factor,
+            params.dashpot_time_step(float(np.min(np.asarray(particles.mass)))))
+        dt_origin = ("the explicit limit of the tangential dashpots" if by_dashpot
+                     else "dem.safety_factor x t_crit")
     return DEMSetup(
         particles=particles, params=params, k_n=k_n, t_crit=t_crit, dt=dt, dt_origin=dt_origin,
         dtype=jnp.float32 if cfg.precision == "float32" else jnp.float64, gravity=gravity,

@@ -33,8 +33,9 @@ def particle_mechanics(dem, state) -> dict:
       number; the contacts that conduct may include small gaps, ``heat.contact.gap_tolerance``);
     - ``wall_contacts`` (N,): number of wall primitives it overlaps.
 
-    Pure JAX (``vmap`` over an ensemble's states works); geometry only, the contact law is not
-    evaluated.
+    Geometry only (the overlaps, as the contact law's ``ovl > 0``), not :meth:`DEM.contacts`:
+    that would evaluate the contact law, in the C++ loop where the run uses it, which cannot be
+    ``vmap``-ped over an ensemble's states; this can.
     """
     pos = state.position
     n = pos.shape[0]

@@ -143,6 +143,12 @@ class ContactForces:
         return self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
                               temperature)
 
+    def at(self, state) -> ForceResult:
+        """The forces at a :class:`~drumheat.mechanics.DEMState` with its own velocities
+        (a state's contacts, its energy book, the forces of a fresh state)."""
+        return self(state.position, state.velocity, state.angular_velocity, state.time,
+                    state.nbrs, state.pair_spring, state.wall_spring)
+
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
                   temperature) -> ForceResult:  # pragma: no cover - abstract
         raise NotImplementedError

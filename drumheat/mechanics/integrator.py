@@ -65,7 +65,7 @@ from drumheat.mechanics.errors import (
 )
 from drumheat.mechanics.forces import ContactForces, Contacts, make_contact_forces
 from drumheat.mechanics.neighbors import PEC, NeighborSetup, make_neighbor_setup, remap_pair_data
-from drumheat.models.soft_sphere import STICKING_CONTACTS
+from drumheat.models.soft_sphere import STICKING_CONTACTS, default_time_step
 
 __all__ = [
     "DEMAccuracyWarning",
@@ -520,8 +520,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             w2 = jnp.sum(w2, axis=-1)
         er = 0.5 * jnp.sum(inertia * w2)
         ep = -jnp.sum(m * (state.position @ forces.g_vec))
-        c = forces(state.position, state.velocity, state.angular_velocity, state.time,
-                   state.nbrs, state.pair_spring, state.wall_spring).contacts
+        c = forces.at(state).contacts
         el = forces.elastic_energy(c, state.pair_spring, state.wall_spring)
         return dict(kinetic=ek, rotational=er, potential=ep, elastic=el,
                     total=ek + er + ep + el)
@@ -574,7 +573,7 @@ def _checked_time_step(mass, params, dt, safety_factor, rotation):
     t_crit = critical_time_step(m_min, k_max)
     t_dash = params.dashpot_time_step(m_min) if rotation else math.inf
     given = dt is not None
-    dt = float(dt if given else min(safety_factor * t_crit, t_dash))
+    dt = float(dt if given else default_time_step(t_crit, safety_factor, t_dash)[0])
     if not dt > 0:
         raise ValueError(f"time step must be positive, got dt = {dt}")
     if dt > t_crit:

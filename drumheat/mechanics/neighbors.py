@@ -228,6 +228,12 @@ class CellGrid:
         mult = np.cumprod((1,) + tuple(self.cells[:-1])).astype(np.int32)
         return jnp.sum(coords * jnp.asarray(mult), axis=-1)
 
+    def occupancy(self, cell):
+        """``(flat cell number of each particle (N,), particles per cell (n_cells,))`` of cell
+        coordinates :meth:`cell_index`."""
+        key = self.flat(cell)
+        return key, jax.ops.segment_sum(jnp.ones(cell.shape[0], jnp.int32), key, self.n_cells)
+
     def visit(self, position, cell_capacity: int, on_hits, carry):
         """Visit every pair closer than the cutoff once, one neighbouring cell at a time.
 
@@ -239,11 +245,10 @@ class CellGrid:
         """
         n = position.shape[0]
         cell = self.cell_index(position)
-        key = self.flat(cell)
+        key, count = self.occupancy(cell)
         order = jnp.argsort(key).astype(jnp.int32)
         start = jnp.searchsorted(key[order], jnp.arange(self.n_cells, dtype=key.dtype),
                                  side="left").astype(jnp.int32)
-        count = jax.ops.segment_sum(jnp.ones(n, jnp.int32), key, self.n_cells)
         sorted_pos = position[order]
         slot = jnp.arange(cell_capacity, dtype=jnp.int32)
         me = jnp.arange(n, dtype=jnp.int32)
@@ -373,8 +378,7 @@ class NeighborSetup:
 
 @partial(jax.jit, static_argnums=0)
 def _fullest_cell(grid: CellGrid, pos):
-    return jnp.max(jax.ops.segment_sum(jnp.ones(pos.shape[0], jnp.int32),
-                                       grid.flat(grid.cell_index(pos)), grid.n_cells))
+    return jnp.max(grid.occupancy(grid.cell_index(pos))[1])
 
 
 @partial(jax.jit, static_argnums=(0, 2))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 __all__ = ["normal_stiffness_from_youngs", "critical_time_step", "dashpot_time_step",
-           "STICKING_CONTACTS"]
+           "default_time_step", "STICKING_CONTACTS"]
 
 #: sticking contacts of one particle assumed by :func:`dashpot_time_step`: the most a sphere
 #: has in a monolayer (hexagonal, the 2D drums) and the mean coordination of a jammed 3D
@@ -68,3 +68,11 @@ def dashpot_time_step(m_min, gamma_pair, gamma_wall, contacts=STICKING_CONTACTS)
     """
     rate = 2.5 * contacts * max(2.0 * gamma_pair, gamma_wall) / m_min
     return math.inf if rate <= 0 else 2.0 / rate
+
+
+def default_time_step(t_crit, safety_factor, t_dashpot) -> tuple[float, bool]:
+    """The default DEM step, s: the smaller of ``safety_factor x t_crit``
+    (:func:`critical_time_step`) and the dashpot limit ``t_dashpot`` (:func:`dashpot_time_step`),
+    and whether the dashpot limit set it."""
+    step = safety_factor * t_crit
+    return (t_dashpot, True) if t_dashpot < step else (step, False)

@@ -61,7 +61,8 @@ class Result:
 
     def particles(self, every: int = 1) -> pd.DataFrame:
         """One row per particle and output time: ``t``, ``particle``, ``group``, ``diameter``,
-        ``T``, ``x``, ``y`` (``z``), ``heat_rate`` (see :func:`drumheat.particle_table`)."""
+        ``T``, ``x``, ``y`` (``z``), ``heat_rate`` and, with a DEM, the particles' mechanics
+        (see :func:`drumheat.particle_table`)."""
         from drumheat.results.particles import particle_table
 
         return particle_table(self, every)
