@@ -336,7 +336,7 @@ def _chain_transient(n=9, tol=1e-10):
         ax.plot([], [], "o", ms=3, color="C0", label="drumheat (static bed)")
         ax.set(xlabel="sphere index", ylabel="T / K",
                title="Line across the drum, shell at 343 K")
-        ax.legend()
+        ax.legend(loc="lower right", fontsize=8)
         fig.tight_layout()
         fig.savefig(path, dpi=120)
         plt.close(fig)
