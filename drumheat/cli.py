@@ -1,7 +1,8 @@
 """The ``drumheat`` command (DESIGN.md, command line).
 
 ``drumheat scenes`` lists the built-in scenes; ``drumheat run SCENE [--out DIR] [--set K=V]``
-runs one. Bad input gives a one-paragraph message naming the key, the value and what is
+runs one; ``drumheat validate [--quick] [--out DIR]`` runs the validation suite
+(:mod:`drumheat.analysis.validation`; exit code 1 when a comparison is outside its tolerance). Bad input gives a one-paragraph message naming the key, the value and what is
 allowed, and exit code 2; nothing half-written is left behind.
 """
 
@@ -105,6 +106,30 @@ def _cmd_export_vtk(args) -> int:
     return 0
 
 
+def _cmd_validate(args) -> int:
+    from drumheat.analysis.validation import format_table, run_validation, write_validation
+    from drumheat.results.files import check_out_dir
+
+    if args.out is not None:
+        check_out_dir(args.out)  # refuse a folder of the user's before the work, not after
+    try:
+        rows, figures = run_validation(quick=args.quick, cases=args.case or None,
+                                       progress=lambda line: print(line, file=sys.stderr,
+                                                                   flush=True))
+    except ValueError as err:
+        return _fail(str(err))
+    print(format_table(rows))
+    if args.out is not None:
+        out = write_validation(rows, figures, args.out)
+        print(f"validation.csv, validation.md and {len(figures)} figures in {out}/")
+    failed = [r for r in rows if r.status == "FAIL"]
+    if failed:
+        print(f"{len(failed)} of {len(rows)} comparisons outside their tolerance",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
 def _scene_command(sub, name: str, func, help: str):
     """A subcommand that takes a scene (built-in name or file) and ``--set`` overrides."""
     c = sub.add_parser(name, help=help)
@@ -157,6 +182,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "steps and estimated wall time (packs the bed, times a warm-up)")
     _scene_command(sub, "explain", _cmd_explain, "size of each heat-transfer effect in a scene, "
                    "and which to drop or add")
+    val = sub.add_parser("validate", help="run the validation suite: drumheat against closed "
+                                          "forms, the penetration model and the thesis' data")
+    val.add_argument("--quick", action="store_true",
+                     help="the quick cases only (under a minute); default: the full suite")
+    val.add_argument("--out", help="folder for validation.csv, validation.md and the figures")
+    val.add_argument("--case", action="append", metavar="NAME",
+                     help="run only this case (repeatable): chain, lattice, drum-pm, thesis")
+    val.set_defaults(func=_cmd_validate)
     a = sub.add_parser("animate", help="animate a result folder: the drum coloured by "
                                        "temperature, with a clock (GIF or MP4)")
     a.add_argument("result_dir", metavar="RESULT_DIR",

@@ -234,6 +234,36 @@ def clean_stale_temporaries(out: Path) -> list[Path]:
     return removed
 
 
+def write_folder(out: str | Path, fill) -> Path:
+    """Write a folder of drumheat's own files atomically; returns it.
+
+    ``fill(tmp)`` writes the files into a fresh temporary folder beside ``out``; the folder
+    then gets its manifest and replaces ``out`` the way a result folder does (an empty folder
+    or an earlier folder of drumheat's own files only; anything else is refused before
+    ``fill`` runs, and nothing of the user's is deleted). Used for folders that are not run
+    results, e.g. ``drumheat validate --out``.
+
+    Raises
+    ------
+    ResultFolderError
+        If ``out`` holds something drumheat did not write (see :func:`check_out_dir`).
+    """
+    out = Path(out)
+    check_out_dir(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_temporaries(out)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.drumheat-tmp-", dir=out.parent))
+    try:
+        tmp.chmod(0o777 & ~_umask())  # mkdtemp makes it 0700
+        fill(tmp)
+        _write_manifest(tmp, [p.name for p in tmp.iterdir()])
+        place_folder(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
+
+
 def write_results(result, out_dir=None, figures: bool = True, figure_formats=("png",),
                   dpi: int = 120) -> Path:
     """Write a :class:`drumheat.runner.Result` to ``out_dir`` atomically; returns the folder.
