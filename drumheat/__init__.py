@@ -42,7 +42,7 @@ _API = {
         "RunConfig", "DrumConfig", "GroupConfig", "GasConfig", "HeatConfig", "ContactConfig",
         "WallConfig", "LossConfig", "ConvectionConfig", "RadiationConfig", "RadiationSurface",
         "InternalConfig", "MotionConfig", "PackingConfig", "DEMConfig", "ReplayConfig",
-        "GranulatorConfig", "ChannelConfig", "HopperConfig")},
+        "GranulatorConfig", "ChannelConfig", "HopperConfig", "EntranceConfig")},
     # running
     "run": "drumheat.runner.loop", "run_ensemble": "drumheat.runner.ensemble",
     "EnsembleResult": "drumheat.runner.ensemble", "Result": "drumheat.results.result",

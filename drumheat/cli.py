@@ -41,6 +41,11 @@ def _cmd_run(args) -> int:
     for col in result.timeseries.columns:
         if col.startswith("T_mean"):
             print(f"  final {col:<20} {s[col]:.3f} K ({s[col] - 273.15:.3f} degC)")
+    if "outlet" in s:  # an open apparatus: T_mean includes the particles queued at the feeder
+        o = s["outlet"]
+        for name, key in (("particles out", "T_particle_out"), ("gas out", "T_gas_out")):
+            print(f"  {name:<26} {o[key]:.3f} K ({o[key] - 273.15:.3f} degC)")
+        print(f"  {'Q_2 (slice / channel)':<26} {o['Q_2']:.2f} W / {o['Q_2_channel']:.1f} W")
     print(f"results in {out}/")
     return 0
 

@@ -214,3 +214,140 @@ def test_explain_refuses_the_channel_with_a_clear_message():
     from drumheat.cli import main
 
     assert main(["explain", "kraychev-channel"]) == 2
+
+
+# ---------------------------------------------------------------------------------------------
+# the entrance jet ([channel.entrance]) and the outlet headline of summary.json
+# ---------------------------------------------------------------------------------------------
+
+from drumheat.motion.pneumatic import entrance_length, jet_velocity_factor  # noqa: E402
+
+
+def test_jet_velocity_factor_limits_and_decay():
+    gap, b0, K = 0.018, 0.008, 2.47
+    y = np.linspace(0.0, 1.3, 2601)
+    f = jet_velocity_factor(y, gap, b0, K)
+    x_c, x_e = K**2 * b0, entrance_length(gap, b0, K)
+    # mass conservation through the slit: the digest's 37 m/s at 16.5 m/s in the channel
+    assert 16.5 * f[0] == pytest.approx(37.125, rel=1e-12)
+    np.testing.assert_array_equal(f[y <= x_c], gap / b0)  # potential core
+    mid = (y > x_c) & (y < x_e)
+    np.testing.assert_allclose(f[mid], gap / b0 * np.sqrt(x_c / y[mid]), rtol=1e-14)
+    np.testing.assert_array_equal(f[y >= x_e], 1.0)  # the channel's mean beyond x_e
+    assert x_e == pytest.approx(K**2 * gap**2 / b0, rel=1e-14)  # 0.247 m for the rig
+    assert float(jet_velocity_factor(x_e, gap, b0, K)) == pytest.approx(1.0, rel=1e-12)
+    # limits: a slit as wide as the channel, or no decay length: exactly the mean
+    np.testing.assert_array_equal(jet_velocity_factor(y, gap, gap, K), 1.0)
+    np.testing.assert_array_equal(jet_velocity_factor(y[1:], gap, b0, 0.0), 1.0)
+    assert entrance_length(gap, b0, 0.0) == 0.0
+    # the JAX version is the numpy one
+    np.testing.assert_array_equal(np.asarray(jet_velocity_factor(jnp.asarray(y), gap, b0, K)), f)
+
+
+def test_entrance_table_is_checked():
+    with pytest.raises(SceneError, match="channel.entrance.slit_width"):
+        load_scene("kraychev-channel", ["channel.entrance.slit_width=0.02"])
+    with pytest.raises(SceneError, match="channel.entrance.decay_constant"):
+        load_scene("kraychev-channel", ["channel.entrance.decay_constant=-1"])
+    with pytest.raises(SceneError, match="channel.entrance.slit_width"):
+        load_scene("kraychev-channel", ["channel.entrance.slit_width=0"])
+
+
+def test_entrance_acceleration_is_resolved_by_the_dem_step():
+    """The wheat scene with the rig's slit: a grain fed at rest crosses the jet's potential
+    core (49 mm) in many DEM steps, and its drag relaxation time is many steps long."""
+    scene = load_scene("kraychev-channel", ["channel.entrance.slit_width=0.008"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # no under-resolution warning
+        model = PneumaticChannel(scene)
+    info = model.entrance_info()
+    assert info["slit_velocity"] == pytest.approx(16.5 * 18 / 8, rel=1e-12)
+    assert info["core_length"] == pytest.approx(2.47**2 * 0.008, rel=1e-12)
+    assert info["steps_in_core"] > 100 and info["relaxation_steps"] > 100
+    assert info["steps_in_entrance"] > info["steps_in_core"]
+    # the jet shortens the single-grain ascent
+    assert model.holdup_estimate()["residence_time"] < PneumaticChannel(
+        load_scene("kraychev-channel")).holdup_estimate()["residence_time"]
+
+
+def _busy(entrance=None, duration=0.12):
+    scene = channel_scene(d=4e-3, rho=1300.0, count=60, height=0.08, gap=0.012, depth=0.016,
+                          u=16.0, m_s=0.05, v_in=2.0, duration=duration, output_interval=0.04,
+                          dt=5e-5, stiffness=2e3,
+                          convection={"correlation": "gnielinski-kraychev"}, cells=8,
+                          spread=1.5)
+    if entrance is not None:
+        from drumheat.scene import to_dict
+        raw = to_dict(scene)
+        raw["channel"]["entrance"] = entrance
+        scene = scene_from_dict(raw)
+    return scene
+
+
+@pytest.mark.parametrize("entrance", [{"slit_width": 0.012}, {"slit_width": 0.004,
+                                                                "decay_constant": 0.0}])
+def test_entrance_limits_give_todays_channel_exactly(busy_channel, entrance):
+    """A slit as wide as the channel (jet velocity = mean velocity) or a zero entrance length
+    reproduce the channel without entrance bit for bit."""
+    _, traj0, st0, ev0 = busy_channel
+    _, traj, st, ev = run(_busy(entrance))
+    np.testing.assert_array_equal(traj.T, traj0.T)
+    np.testing.assert_array_equal(traj.position, traj0.position)
+    np.testing.assert_array_equal(traj.extra["H_gas"], traj0.extra["H_gas"])
+    assert ev["T_particle_out"] == ev0["T_particle_out"]
+
+
+@pytest.fixture(scope="module")
+def busy_entrance():
+    """The busy channel with a 4 mm slit in its 12 mm gap (jet of 48 m/s, core 24 mm, entrance
+    length 0.22 m: the whole 0.08 m channel is entrance)."""
+    return run(_busy({"slit_width": 0.004}))
+
+
+def test_entrance_conserves_energy_and_speeds_up_heat_transfer(busy_channel, busy_entrance):
+    model, traj, st, ev = busy_entrance
+    stored = (traj.T - traj.T[0]) @ traj.capacity
+    q_gas, q_flow = traj.Q["gas"], traj.Q["flow"]
+    scale = float(np.max(np.abs(q_gas)))
+    np.testing.assert_allclose(stored, q_gas + q_flow, atol=1e-11 * scale)
+    # the jet's air is the channel's air: the gas gives off what the particles take up
+    np.testing.assert_allclose(traj.extra["H_gas"], q_gas, atol=1e-11 * scale)
+    assert energy_balance(traj)[1] < 1e-11
+    ev0 = busy_channel[3]
+    # faster gas at the foot: more slip, larger alpha, faster grains
+    assert ev["slip_mean"] > ev0["slip_mean"] and ev["alpha_mean"] > ev0["alpha_mean"]
+    assert ev["velocity_mean"] > ev0["velocity_mean"]
+    assert ev["entrance"]["slit_velocity"] == pytest.approx(48.0, rel=1e-12)
+
+
+def test_gas_velocity_of_the_hooks_is_the_jet(busy_entrance):
+    model = busy_entrance[0]
+    u = model._gas_velocity()
+    rho = jnp.asarray([1.2, 1.2, 1.2])
+    y = jnp.asarray([0.002, 0.05, 0.5])
+    expect = model.mass_flux / 1.2 * jet_velocity_factor(np.asarray(y), 0.012, 0.004, 2.47)
+    np.testing.assert_allclose(np.asarray(u(y, rho)), expect, rtol=1e-14)
+    assert float(u(y, rho)[0]) == pytest.approx(3 * model.mass_flux / 1.2, rel=1e-14)
+
+
+def test_summary_reports_the_outlet(busy_channel, tmp_path):
+    """summary.json carries the outlet temperatures and Q_2 of the steady window (the headline
+    T_mean includes the queued particles)."""
+    import json
+
+    from drumheat.results.files import write_results
+    from drumheat.results.result import make_result
+
+    model, traj, _, ev = busy_channel
+    result = make_result(model.scene, traj, 0.0)
+    write_results(result, tmp_path / "res", figures=False)
+    out = json.loads((tmp_path / "res" / "summary.json").read_text())["outlet"]
+    assert out["T_particle_out"] == ev["T_particle_out"] and out["T_gas_out"] == ev["T_gas_out"]
+    assert out["Q_2"] == ev["Q_2"] == pytest.approx(
+        model.W_gas * (ev["T_gas_out"] - T_GAS), rel=1e-12)
+    assert out["Q_2_channel"] == pytest.approx(ev["Q_2"] * 1.0, rel=1e-12)  # length = depth
+    assert out["window_s"][1] == pytest.approx(traj.t[-1])
+    assert out["window_s"][1] - out["window_s"][0] == pytest.approx(ev["window"])
+    assert out["entrance"] is False
+    # the particles queued at the feeder sit at the inlet temperature, inside T_mean
+    assert np.isfinite(out["T_particle_out"]) and out["T_particle_out"] < 313.15

@@ -20,6 +20,16 @@ What is simulated
   or the constants of ``[gas]``). The drag acts on the particles only (no momentum coupling
   back to the gas; the interstitial and superficial velocities are taken equal: the solids
   volume fraction of the wheat scene is 1.6 % on average, 9 % in the lowest 25 mm).
+* **Entrance jet** (optional, ``[channel.entrance]``): the whole gas flow enters through a slit
+  of width ``b0`` (kraychev-tube-bundle.md sections 1, 2: 8 mm, 37 m/s), so at the foot of the
+  channel the particles see ``u_k x gap/b0``; above the slit's potential core ``x_c = K^2 b0``
+  the velocity decays as the centreline of a plane free jet, ``(x_c/y)^1/2`` (Rajaratnam 1976,
+  ``K = 2.47``), until it meets the channel's mean ``u_k`` at the entrance length ``x_c
+  (gap/b0)^2`` (:func:`jet_velocity_factor`). Drag and the relative velocity of the convection
+  correlation use this velocity; each particle takes it at its own height (not per cell). The
+  jet's air is the channel's air: every cross-section carries the same gas mass flow (the jet
+  plus the eddies beside it that it entrains and returns), so the gas energy balance below is
+  unchanged, the gas of a cell mixed across the gap.
 * **Heat** (``extra_update`` hook, every mechanical step, temperatures in float64):
   ``Q_i = alpha_i pi d_i^2 (T_g - T_i)`` with ``alpha_i`` from ``[heat.convection]`` evaluated at
   each particle's own slip speed ``|u_k - v_i|`` (correlation ``"gnielinski-kraychev"``: the
@@ -154,6 +164,39 @@ def cocurrent_outlet(T_s_in, T_g_in, C_s, C_g, UA):
     return T_s_out, T_g_out
 
 
+def jet_velocity_factor(y, gap, slit_width, decay_constant):
+    """Gas velocity in the channel's entrance section over the channel's mean velocity (>= 1).
+
+    The whole gas flow enters through a slit of width ``b0 = slit_width`` at ``y = 0``, so its
+    velocity there is ``u_slit = u_mean gap/b0`` (mass conservation; kraychev-tube-bundle.md
+    section 2: 16.5 m/s x 18/8 = 37.1 m/s, the digest's 37 m/s in the slit). Above the slit the
+    particles see the centreline velocity of a plane turbulent free jet (Rajaratnam 1976,
+    *Turbulent Jets*, Elsevier, ch. 2: ``u_m/U_0 = 3.50 (x/b)^-1/2`` with ``b`` the slot's
+    half-width, i.e. ``K (x/b0)^-1/2`` with ``K = 2.47`` and the full width ``b0``; Albertson,
+    Dai, Jensen & Rouse 1950, Trans. ASCE 115: ``K = 2.28``):
+
+    ``u/u_mean = max(1, (gap/b0) min(1, (x_c/y)^1/2))``, ``x_c = K^2 b0`` (the potential core,
+    where the decay law meets ``u_slit``).
+
+    It reaches the mean velocity at the entrance length ``x_e = x_c (gap/b0)^2``
+    (:func:`entrance_length`) and stays there. ``slit_width = gap`` or ``decay_constant = 0``
+    give exactly 1 above the inlet (no entrance). Works on numpy and JAX arrays.
+    """
+    R = gap / slit_width
+    x_c = decay_constant**2 * slit_width
+    xp = jnp if isinstance(y, jax.Array) else np
+    y = xp.asarray(y)
+    inside = y <= x_c
+    decay = xp.where(inside, 1.0, xp.sqrt(x_c / xp.where(inside, 1.0, y)))
+    return xp.maximum(1.0, R * decay)
+
+
+def entrance_length(gap, slit_width, decay_constant):
+    """Height above the slit where the jet's centreline velocity falls to the channel's mean,
+    ``x_e = K^2 b0 (gap/b0)^2`` (m; :func:`jet_velocity_factor`: Rajaratnam 1976, ch. 2)."""
+    return decay_constant**2 * slit_width * (gap / slit_width) ** 2
+
+
 def _cd_numpy(law, Re):
     Re = max(Re, 1e-12)
     if law == "stokes":
@@ -163,12 +206,14 @@ def _cd_numpy(law, Re):
     return 24.0 / Re * (1.0 + 0.15 * Re**0.687) if Re <= 1000.0 else 0.44
 
 
-def ascent(d, rho_p, u_gas, rho_g, mu_g, height, v0=0.0, drag_law="schiller_naumann", g=9.81):
-    """One particle rising in a uniform upward gas stream, no walls or contacts (1D ODE).
+def ascent(d, rho_p, u_gas, rho_g, mu_g, height, v0=0.0, drag_law="schiller_naumann", g=9.81,
+           profile=None):
+    """One particle rising in an upward gas stream, no walls or contacts (1D ODE).
 
     ``m dv/dt = F_drag(u - v) + (rho_g - rho_p) V g`` integrated from ``y = 0`` with ``v0``
-    until ``y = height`` (:func:`scipy.integrate.solve_ivp`, rtol 1e-10). For estimates (the
-    particle count that holds the channel's hold-up) and comparisons.
+    until ``y = height`` (:func:`scipy.integrate.solve_ivp`, rtol 1e-10), ``u = u_gas
+    profile(y)`` (``profile``: e.g. the entrance jet, :func:`jet_velocity_factor`; default 1).
+    For estimates (the particle count that holds the channel's hold-up) and comparisons.
 
     Returns
     -------
@@ -183,7 +228,7 @@ def ascent(d, rho_p, u_gas, rho_g, mu_g, height, v0=0.0, drag_law="schiller_naum
 
     def rhs(t, s):
         v = s[1]
-        w = u_gas - v
+        w = u_gas * (1.0 if profile is None else float(profile(s[0]))) - v
         Re = abs(w) * d * rho_g / mu_g
         F = 0.5 * rho_g * _cd_numpy(drag_law, Re) * math.pi * d**2 / 4.0 * abs(w) * w
         return [v, (F + (rho_g - rho_p) * V * g) / m]
@@ -275,7 +320,11 @@ class PneumaticChannel(DEMMotion):
                                                                 scene.run.output_interval)
         self.steady_after = ch.steady_after if ch.steady_after is not None else \
             0.5 * scene.run.duration
+        ent = ch.entrance
+        self.entrance = None if ent is None else (self.gap, ent.slit_width, ent.decay_constant)
         self.dem = self.make_dem()
+        if self.entrance is not None:
+            self._check_entrance_resolution()
 
     # -- gas ------------------------------------------------------------------------------------
     def gas_props(self, T):
@@ -299,14 +348,104 @@ class PneumaticChannel(DEMMotion):
         d, rho_p = float(self.diameter.mean()), float(self.density.mean())
         a = ascent(d, rho_p, self.scene.channel.gas_velocity, rho, nu * rho, self.H,
                    self.scene.channel.particle_inlet_velocity, self.scene.channel.drag_law,
-                   self.g)
+                   self.g, profile=self.velocity_profile())
         m_p = float(self.mass.mean())
         hold = self.m_solids * a["residence_time"]
         return dict(residence_time=a["residence_time"], terminal_velocity=a["terminal_velocity"],
                     holdup_mass=hold, holdup_particles=hold / m_p,
                     exit_velocity=float(a["v"][-1]))
 
+    def velocity_profile(self):
+        """``y -> u(y)/u_mean`` of the entrance jet (:func:`jet_velocity_factor`), or None
+        without ``[channel.entrance]``."""
+        if self.entrance is None:
+            return None
+        gap, b0, K = self.entrance
+        return lambda y: jet_velocity_factor(y, gap, b0, K)
+
+    def entrance_info(self) -> dict:
+        """The entrance jet: slit velocity, potential core and entrance length (m), and how
+        finely the DEM step resolves a particle's acceleration in it (single-particle ascent
+        from the inlet velocity, :func:`ascent`): steps to cross the potential core, steps to
+        cross the entrance length, and the drag relaxation time ``m |w| / F_drag`` at the
+        inlet over the step. Empty without ``[channel.entrance]``."""
+        if self.entrance is None:
+            return {}
+        gap, b0, K = self.entrance
+        ch = self.scene.channel
+        rho, _, _, nu = (float(x) for x in self.gas_props(self.T_gas_in))
+        d, rho_p = float(self.diameter.mean()), float(self.density.mean())
+        u_slit = ch.gas_velocity * gap / b0
+        x_c, x_e = K**2 * b0, entrance_length(gap, b0, K)
+        a = ascent(d, rho_p, ch.gas_velocity, rho, nu * rho, self.H, ch.particle_inlet_velocity,
+                   ch.drag_law, self.g, profile=self.velocity_profile())
+        t_at = lambda y: float(np.interp(min(y, self.H), a["y"], a["t"]))  # noqa: E731
+        w = u_slit - ch.particle_inlet_velocity
+        F = float(drag_model.drag_force(w, d, rho, nu * rho, ch.drag_law))
+        tau = float(self.mass.mean()) * w / F
+        return dict(slit_velocity=u_slit, core_length=x_c, entrance_length=x_e,
+                    steps_in_core=t_at(x_c) / self.dt, steps_in_entrance=t_at(x_e) / self.dt,
+                    relaxation_steps=tau / self.dt)
+
+    def _check_entrance_resolution(self):
+        gap, b0, K = self.entrance
+        if K == 0.0 or b0 == gap:  # no jet: the channel's mean velocity everywhere
+            return
+        info = self.entrance_info()
+        if min(info["steps_in_core"], info["relaxation_steps"]) < 20:
+            warnings.warn(f"scene {self.scene.name!r}: the DEM step resolves the particles' "
+                          f"acceleration in the entrance jet poorly ({info['steps_in_core']:.0f} "
+                          f"steps to cross its core, relaxation time "
+                          f"{info['relaxation_steps']:.0f} steps; want >= 20). Lower dem.dt.",
+                          UserWarning, stacklevel=3)
+
     # -- the DEM with hooks ---------------------------------------------------------------------
+    def _gas_velocity(self):
+        """``(y, rho_g) -> u``: the plug-flow velocity ``G/rho_g`` times the entrance jet's
+        factor (:func:`jet_velocity_factor`) where ``[channel.entrance]`` is given. The jet's air
+        is the channel's air: the mass flow of the gas energy balance is unchanged."""
+        G_flux = self.mass_flux
+        if self.entrance is None:
+            return lambda y, rho: G_flux / rho
+        gap, b0, K = self.entrance
+        return lambda y, rho: G_flux / rho * jet_velocity_factor(y, gap, b0, K)
+
+    def _release(self):
+        """The feeder's release of parked particle j at the inlet (module docstring)."""
+        f64 = jnp.float64
+        ch = self.scene.channel
+        r = jnp.asarray(self.radius, f64)
+        mass = jnp.asarray(self.mass, f64)
+        gap, D, v_in = self.gap, self.D, ch.particle_inlet_velocity
+        spread = ch.inlet_velocity_spread
+        key0 = jax.random.PRNGKey(self.scene.run.seed)
+
+        def release(args):
+            pos, vel, w, f, tq, act, credit, acc, step, j = args
+            rj = r[j]
+            kc, kv = jax.random.split(jax.random.fold_in(key0, step))
+            u = jax.random.uniform(kc, (N_CANDIDATES, 2), f64)
+            lat = spread * jax.random.uniform(kv, (2,), f64, -1.0, 1.0)
+            cand = jnp.stack([rj + u[:, 0] * (gap - 2 * rj), jnp.full(N_CANDIDATES, rj),
+                              u[:, 1] * D], axis=1)
+            p64 = pos.astype(f64)
+            dd = cand[:, None, :] - p64[None, :, :]
+            dz = dd[..., 2] - D * jnp.round(dd[..., 2] / D)
+            dist = jnp.sqrt(dd[..., 0] ** 2 + dd[..., 1] ** 2 + dz**2) - (r[None, :] + rj)
+            clear = jnp.min(jnp.where(act[None, :], dist, jnp.inf), axis=1)
+            best = jnp.argmax(clear)
+            ok = clear[best] > 0.02 * rj
+            pos = jnp.where(ok, pos.at[j].set(cand[best].astype(pos.dtype)), pos)
+            v_new = jnp.stack([lat[0], jnp.asarray(v_in, f64), lat[1]]).astype(vel.dtype)
+            vel = jnp.where(ok, vel.at[j].set(v_new), vel)
+            act = jnp.where(ok, act.at[j].set(True), act)
+            credit = jnp.where(ok, credit - mass[j], credit)
+            acc = dict(acc, released=acc["released"] + ok.astype(jnp.int32),
+                       blocked=acc["blocked"] + (~ok).astype(jnp.int32))
+            return pos, vel, w, f, tq, act, credit, acc, step, j
+
+        return release
+
     def _hooks(self):
         ch = self.scene.channel
         conv = self.scene.heat.convection
@@ -314,7 +453,6 @@ class PneumaticChannel(DEMMotion):
         dy = H / n_cells
         f64 = jnp.float64
         d = jnp.asarray(self.diameter, f64)
-        r = jnp.asarray(self.radius, f64)
         mass = jnp.asarray(self.mass, f64)
         C = jnp.asarray(self.capacity, f64)
         area = jnp.pi * d**2
@@ -323,15 +461,13 @@ class PneumaticChannel(DEMMotion):
         T_in_p = jnp.asarray(self.T_inlet, f64)
         T_g_in = jnp.asarray(self.T_gas_in, f64)
         W = self.W_gas
-        G_flux = self.mass_flux
         law = ch.drag_law
         two_way = ch.gas_coupling == "two-way"
         props = self.gas_props
         park = jnp.asarray(self.park, f64)
         m_dot = self.m_solids
-        gap, D, v_in = self.gap, self.D, ch.particle_inlet_velocity
-        spread = ch.inlet_velocity_spread
-        key0 = jax.random.PRNGKey(self.scene.run.seed)
+        release = self._release()
+        u_gas = self._gas_velocity()
         film = conv is not None and conv.property_temperature == "film"
         internal = conv is not None and conv.internal_resistance == "transient-sphere"
         if internal:
@@ -357,7 +493,7 @@ class PneumaticChannel(DEMMotion):
             vel = velocity.astype(f64)
             k, Tg = gas_at(extra, pos[:, 1])
             rho, _, _, nu = props(Tg)
-            u = G_flux / rho
+            u = u_gas(pos[:, 1], rho)
             u_rel = jnp.stack([-vel[:, 0], u - vel[:, 1], -vel[:, 2]], axis=1)
             F = (drag_model.drag_force(u_rel, d, rho[:, None], (nu * rho)[:, None], law)
                  - (rho * vol)[:, None] * g_vec)
@@ -372,7 +508,7 @@ class PneumaticChannel(DEMMotion):
             k, Tg = gas_at(extra, pos[:, 1])
             gas = props(Tg)
             rho, cp, lam, nu = props(0.5 * (T + Tg)) if film else gas
-            u = G_flux / gas[0]
+            u = u_gas(pos[:, 1], gas[0])
             u_rel = jnp.stack([-vel[:, 0], u - vel[:, 1], -vel[:, 2]], axis=1)
             slip = jnp.sqrt(jnp.sum(u_rel**2, axis=1))
             actf = act.astype(f64)
@@ -411,30 +547,6 @@ class PneumaticChannel(DEMMotion):
             Q = dict(extra["Q"], gas=extra["Q"]["gas"] + dt * jnp.sum(q))
             return dict(extra, T=T + dt * q / C, T_gas=T_nodes, Q=Q, H_gas=extra["H_gas"] + dH,
                         acc=acc)
-
-        def release(args):
-            pos, vel, w, f, tq, act, credit, acc, step, j = args
-            rj = r[j]
-            kc, kv = jax.random.split(jax.random.fold_in(key0, step))
-            u = jax.random.uniform(kc, (N_CANDIDATES, 2), f64)
-            lat = spread * jax.random.uniform(kv, (2,), f64, -1.0, 1.0)
-            cand = jnp.stack([rj + u[:, 0] * (gap - 2 * rj), jnp.full(N_CANDIDATES, rj),
-                              u[:, 1] * D], axis=1)
-            p64 = pos.astype(f64)
-            dd = cand[:, None, :] - p64[None, :, :]
-            dz = dd[..., 2] - D * jnp.round(dd[..., 2] / D)
-            dist = jnp.sqrt(dd[..., 0] ** 2 + dd[..., 1] ** 2 + dz**2) - (r[None, :] + rj)
-            clear = jnp.min(jnp.where(act[None, :], dist, jnp.inf), axis=1)
-            best = jnp.argmax(clear)
-            ok = clear[best] > 0.02 * rj
-            pos = jnp.where(ok, pos.at[j].set(cand[best].astype(pos.dtype)), pos)
-            v_new = jnp.stack([lat[0], jnp.asarray(v_in, f64), lat[1]]).astype(vel.dtype)
-            vel = jnp.where(ok, vel.at[j].set(v_new), vel)
-            act = jnp.where(ok, act.at[j].set(True), act)
-            credit = jnp.where(ok, credit - mass[j], credit)
-            acc = dict(acc, released=acc["released"] + ok.astype(jnp.int32),
-                       blocked=acc["blocked"] + (~ok).astype(jnp.int32))
-            return pos, vel, w, f, tq, act, credit, acc, step, j
 
         def boundary_update(state):
             ex = state.extra
@@ -594,6 +706,23 @@ class PneumaticChannel(DEMMotion):
         res["profiles"] = prof
         return res
 
+    def outlet_summary(self, ev: dict, t_end: float) -> dict:
+        """The headline of ``summary.json`` (key ``outlet``): outlet temperatures and ``Q_2``
+        over the steady window, from the evaluation ``ev`` (:meth:`evaluate`).
+
+        The time series' ``T_mean`` is the mean of all particles, those queued at the feeder
+        (at the inlet temperature) included; the outlet temperatures are the ones to quote:
+        ``T_particle_out`` (K, heat-capacity-weighted over the particles that crossed the
+        outlet), ``T_gas_out`` (K, time mean), ``Q_2`` (W, air side ``mdot_L c_pL (T_L2 -
+        T_L1)``, the simulated slice) and ``Q_2_channel`` (W, scaled to the channel length
+        ``channel.length``)."""
+        ch = self.scene.channel
+        return dict(T_particle_out=ev["T_particle_out"], T_gas_out=ev["T_gas_out"],
+                    Q_2=ev["Q_2"], Q_2_channel=ev["Q_2"] * ch.length / self.D,
+                    solids_mass_flow=ev["solids_mass_flow"],
+                    window_s=[t_end - ev["window"], t_end],
+                    entrance=self.entrance is not None)
+
     # -- the loop -------------------------------------------------------------------------------
     def model(self, params=None):
         """No thermal model: the channel couples its gas itself (module docstring); the
@@ -656,9 +785,12 @@ class PneumaticChannel(DEMMotion):
                           stacklevel=2)
         files, info, records = {}, {}, {}
         if evs is not None:
+            if self.entrance is not None:
+                evs["entrance"] = self.entrance_info()
             files["channel.json"] = lambda path: _write_json(path, evs)
             files["channel_profiles.csv"] = lambda path: _write_profiles(path, evs["profiles"])
             info["channel"] = {k: v for k, v in evs.items() if k != "profiles"}
+            info["outlet"] = self.outlet_summary(evs, float(t_out[-1]))
             records["profiles"] = evs["profiles"]
         n_out = len(t_out)
         return Trajectory(

@@ -16,7 +16,8 @@ from drumheat.scene.rules import (DRUM_MOTION_MODELS, MOTION_MODEL_NAMES,
                                   check_apparatus_tables, check_scene)
 from drumheat.scene.spec import REQUIRED, SceneError, Table, parse_override, spec, to_dict
 from drumheat.scene.tables import (CONVECTION_CORRELATIONS, ChannelConfig, ContactConfig,
-                                   ConvectionConfig, DEMConfig, DrumConfig, GasConfig,
+                                   ConvectionConfig, DEMConfig, DrumConfig, EntranceConfig,
+                                   GasConfig,
                                    GranulatorConfig, GroupConfig, HeatConfig, HopperConfig,
                                    InternalConfig, LossConfig, MotionConfig, PackingConfig,
                                    RadiationConfig, RadiationSurface, ReplayConfig, RunConfig,
@@ -30,4 +31,5 @@ __all__ = [
     "HeatConfig", "ContactConfig", "WallConfig", "LossConfig", "ConvectionConfig",
     "RadiationConfig", "RadiationSurface", "InternalConfig", "MotionConfig", "PackingConfig",
     "DEMConfig", "ReplayConfig", "GranulatorConfig", "ChannelConfig", "HopperConfig",
+    "EntranceConfig",
 ]

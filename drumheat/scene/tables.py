@@ -31,8 +31,8 @@ from typing import Any, Optional
 from drumheat.materials import GASES, MATERIALS
 from drumheat.scene.rules import DRUM_MOTION_MODELS, MOTION_MODEL_NAMES, check_scene
 from drumheat.scene.rules import motion_name as _motion_name
-from drumheat.scene.spec import (Table, build_table, building, iter_table_keys, set_path, spec,
-                                 to_dict)
+from drumheat.scene.spec import (SceneError, Table, build_table, building, iter_table_keys,
+                                 set_path, spec, to_dict)
 
 @dataclass(frozen=True)
 class RunConfig(Table):
@@ -557,6 +557,35 @@ class DEMConfig(Table):
         return self.replay_cycle if self.replay_cycle is not None else 0.5 * self.replay_after
 
 @dataclass(frozen=True)
+class EntranceConfig(Table):
+    """``[channel.entrance]``: the jet from the pick-up slit at the foot of the channel.
+
+    kraychev-tube-bundle.md sections 1, 2: the primary gas enters through an 8 mm slit (up to
+    37 m/s) and picks the solids up; the channel's entrance ("development") length gives the
+    high alpha_2. The whole primary gas passes the slit, so its velocity is ``gas_velocity x
+    gap / slit_width`` (16.5 x 18/8 = 37.1 m/s, the digest's 37 m/s). Above the slit the gas
+    velocity that the particles see follows the centreline of a plane free jet, constant over
+    the potential core ``x_c = decay_constant**2 slit_width`` and ``u_slit (x_c/y)**0.5``
+    beyond (Rajaratnam 1976), until it meets the channel's mean velocity at the entrance
+    length ``x_c (gap/slit_width)**2`` (:func:`drumheat.motion.pneumatic.jet_velocity_factor`).
+    An absent table: no entrance, the mean gas velocity everywhere.
+    """
+
+    TABLE = "channel.entrance"
+
+    slit_width: float = spec(0.008, unit="m", gt=0,
+                             doc="Width of the slit the whole gas flow enters through (8 mm, "
+                                 "kraychev-tube-bundle.md section 2); at most channel.gap "
+                                 "(slit_width = gap: no jet).")
+    decay_constant: float = spec(2.47, ge=0, le=5,
+                                 doc="K of the plane free jet's centreline decay u_m/u_slit = "
+                                     "K (y/slit_width)^-1/2 (Rajaratnam 1976, Turbulent Jets, "
+                                     "ch. 2: 3.50 with the half-width, 2.47 with the full slit "
+                                     "width; Albertson et al. 1950: 2.28); potential core "
+                                     "K^2 slit_width; 0: no entrance section.")
+
+
+@dataclass(frozen=True)
 class ChannelConfig(Table):
     """``[channel]``: vertical pneumatic channel of motion model 'pneumatic'.
 
@@ -594,6 +623,16 @@ class ChannelConfig(Table):
     steady_after: Optional[float] = spec(None, unit="s", ge=0,
                                          doc="Start of the averaging window of the *_steady "
                                              "columns; default half the duration.")
+    entrance: Optional[EntranceConfig] = spec(None, doc="The jet from the pick-up slit at the "
+                                                        "channel's foot; absent: none (the "
+                                                        "mean gas velocity everywhere).")
+
+    def check(self, prefix: str, scene_name: str | None) -> None:
+        """The slit is no wider than the channel (the jet decays to the mean velocity)."""
+        if self.entrance is not None and self.entrance.slit_width > self.gap:
+            raise SceneError(f"{prefix}.entrance.slit_width", self.entrance.slit_width,
+                             f"must be at most channel.gap = {self.gap:g} m (the whole gas flow "
+                             "enters through the slit)", scene_name)
 
 
 @dataclass(frozen=True)
