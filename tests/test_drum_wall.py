@@ -198,3 +198,60 @@ def test_bad_input_names_the_key(over, key):
 def test_motion_models_without_the_wall_refuse_it(model):
     with pytest.raises(SceneError, match="motion.model.*static, random, dem"):
         lumped_scene(**{"motion.model": model})
+
+
+def test_explicit_solver_converges_to_the_closed_form_and_refuses_a_large_step():
+    errs = []
+    for dt in (0.2, 0.1):
+        scene = lumped_scene(**{"run.solver": "explicit", "run.dt": dt, "run.duration": 200.0})
+        traj = dh.run(scene, progress=False).trajectory
+        touching = np.abs(traj.T[-1] - traj.T[0]) > 1e-9
+        n_w = touching.sum()
+        A = 2 * math.pi * 0.025 * 0.004
+        steel = material("steel")
+        U = A / (1 / 20.0 + 0.001 / steel.conductivity)
+        Tw, Tb = two_capacity_solution(
+            traj.t, 0.001 * steel.density * steel.heat_capacity * A,
+            float(traj.capacity[touching].sum()), U, n_w * 300.0 * math.pi / 4 * 0.004**2,
+            T_o=400.0, H=5.0 * (A - n_w * 0.004**2), T_g=310.65, T_w0=300.0, T_b0=299.15)
+        errs.append(max(np.max(np.abs(traj.drum_wall["T"][:, 0] - Tw)),
+                        np.max(np.abs(traj.T[:, touching][:, 0] - Tb))))
+    assert errs[1] < 0.05
+    assert errs[0] / errs[1] == pytest.approx(2.0, rel=0.05)  # forward Euler: first order
+    with pytest.raises(SceneError, match="run.dt"):
+        make_motion(lumped_scene(**{"run.solver": "explicit", "run.dt": 40.0}))
+
+
+def test_explicit_solver_with_turning_segments_closes_the_balance():
+    s = load_scene("weigler-glass-random")
+    s = s.replace({"run.duration": 100.0, "run.solver": "explicit", "drum.rpm": 3.0,
+                   "heat.drum_wall": {"thickness": 0.003, "outside": "temperature",
+                                      "outer_temperature": 400.0, "segments": 12}})
+    res = dh.run(s, progress=False)
+    assert res.summary["energy_balance_rel_error"] < 1e-12
+    assert np.ptp(res.trajectory.drum_wall["T"][-1]) > 0.01  # the segments differ
+
+
+def test_ensemble_over_wall_parameters_equals_individual_runs():
+    base = lumped_scene(**{"run.duration": 100.0})
+    variants = [{"heat.drum_wall.thickness": 0.001}, {"heat.drum_wall.thickness": 0.004,
+                                                      "heat.drum_wall.outer_alpha": 50.0}]
+    ens = dh.run_ensemble(base, variants, progress=False)
+    assert ens.vmapped
+    for k, v in enumerate(variants):
+        one = dh.run(base.replace(v), progress=False)
+        np.testing.assert_allclose(ens[k].trajectory.drum_wall["T"], one.trajectory.drum_wall["T"],
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ens[k].T, one.T, rtol=0, atol=1e-9)
+    assert ens[0].summary["T_wall_mean"] != ens[1].summary["T_wall_mean"]
+
+
+def test_dem_refuses_a_wall_too_thin_for_its_thermal_step():
+    from tests.test_coupled import dem_scene
+
+    scene = dem_scene(**{"drum.wall_temperature": 330.0, "dem.thermal_substeps": 50,
+                         "heat.wall": {"model": "constant", "alpha": 200.0},
+                         "heat.drum_wall": {"thickness": 1e-7, "outside": "temperature",
+                                            "outer_temperature": 360.0, "segments": 360}})
+    with pytest.raises(SceneError, match="heat.drum_wall.thickness"):
+        make_motion(scene)
