@@ -28,7 +28,7 @@ from drumheat.mechanics.deposition import Packing, deposit_2d
 from drumheat.models.soft_sphere import default_time_step
 from drumheat.scene import Scene, SceneError
 from drumheat.scene.rules import dem_critical_time_step, dem_stiffness
-from drumheat.thermal.effect import EffectContext, GasState, PlugFlow, TableValues
+from drumheat.thermal.effect import DrumGeometry, EffectContext, GasState, PlugFlow, TableValues
 from drumheat.thermal.model import ThermalModel, make_thermal_model
 from drumheat.thermal.particles import ThermalParticles
 
@@ -110,7 +110,10 @@ def temperature_bounds(scene: Scene) -> tuple[float, float]:
     """Lowest and highest temperature a run of ``scene`` can reach, K.
 
     By the maximum principle every temperature stays between the extremes of the initial
-    temperatures and of all outside reservoirs (gas, walls, radiating surfaces). Used to bound
+    temperatures and of all outside reservoirs (gas, walls, radiating surfaces; a drum wall's
+    outer temperature). A drum wall heated by a prescribed flux q_o has no such bound: each
+    segment can rise by at most ``|q_o| duration / (s rho c_p)`` above it (all the flux into
+    its own capacity, nothing given on). Used to bound
     temperature-dependent conductances (stability limits) and to warn about property fits.
     """
     Ts = [g.temperature for g in scene.groups]
@@ -127,7 +130,19 @@ def temperature_bounds(scene: Scene) -> tuple[float, float]:
         Ts.append(scene.granulator.wall_temperature)
     if scene.hopper is not None:
         Ts += [scene.hopper.tube_temperature, scene.hopper.inlet_temperature]
-    return float(min(Ts)), float(max(Ts))
+    w = scene.heat.drum_wall
+    if w is None:
+        return float(min(Ts)), float(max(Ts))
+    if w.outer_temperature is not None:
+        Ts.append(w.outer_temperature)
+    lo, hi = float(min(Ts)), float(max(Ts))
+    if w.outside == "flux":  # at most the whole flux into one segment's own capacity
+        lib = material(w.material)
+        rho = w.density if w.density is not None else lib.density
+        c = w.heat_capacity if w.heat_capacity is not None else lib.heat_capacity
+        rise = abs(w.outer_flux) * scene.run.duration / (w.thickness * rho * c)
+        lo, hi = (lo - rise, hi) if w.outer_flux < 0 else (lo, hi + rise)
+    return lo, hi
 
 
 # ---------------------------------------------------------------------------------------------
@@ -211,8 +226,18 @@ def thermal_model(scene: Scene, params: dict | None = None, *, wall_temperatures
         wall_temperatures=wall_temperatures, wall_surfaces=wall_surfaces,
         temperature_bounds=temperature_bounds(scene), duration=value("run.duration"),
         gas_velocity=gas_velocity, sink_temperature=sink_temperature, plug_flow=plug_flow,
-        density_given=any(g.density is not None for g in scene.groups), name=scene.name)
+        density_given=any(g.density is not None for g in scene.groups), name=scene.name,
+        drum=drum_geometry(scene) if scene.heat.drum_wall is not None else None)
     return make_thermal_model(heat_tables(scene, params), ctx), initial_temperatures(scene, value)
+
+
+def drum_geometry(scene: Scene) -> DrumGeometry:
+    """The drum as the drum wall's segments see it (``[heat.drum_wall]``): radius, the depth a
+    segment spans (3D: ``drum.depth``; 2D: the monolayer, the number-mean particle diameter)
+    and rpm."""
+    d = scene.drum
+    depth = d.depth if scene.dim == 3 else float(np.mean(diameters(scene)))
+    return DrumGeometry(radius=0.5 * d.diameter, depth=float(depth), rpm=float(d.rpm))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ from drumheat.thermal.model import ThermalModel
 from drumheat.thermal.network import ContactNetwork
 
 __all__ = ["thermal_network", "make_thermal_update", "initial_extra", "reset_record",
-           "reset_count"]
+           "reset_count", "drum_wall_step"]
 
 
 def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
@@ -87,12 +87,18 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     def model_of(extra):
         return eqx.combine(extra["model"], skeleton)
 
-    def thermal_step(extra, idx):
+    drum_wall = model.drum_wall is not None  # [heat.drum_wall]: segments with their own state
+
+    def thermal_step(extra, ops):
+        idx = ops[0] if drum_wall else ops
         net = thermal_network(idx, n, extra["pair_data"]["time"], extra["wall_time"], heated,
                               n_walls, h, wall_ids)
         m = model_of(extra)
-        q, ext = m.heat_flows(extra["T"], net)
-        out = {}
+        if drum_wall:
+            q, ext, out = drum_wall_step(m, extra, net, ops[1], ops[2], h, n_walls)
+        else:
+            q, ext = m.heat_flows(extra["T"], net)
+            out = {}
         if per_wall:
             wall_effect = m.effect("wall")
             qw = (wall_effect.heat_flow_by_wall(extra["T"], m.particles, net, n_walls)
@@ -115,15 +121,33 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
                  "wall": extra["count"]["wall"] + jnp.sum(wm * slot_heated)}
         extra = dict(extra, pair_data=pair, wall_time=extra["wall_time"] + wm,
                      rec_wall_time=extra["rec_wall_time"] + wm, k=extra["k"] + 1, count=count)
+        ops = (state.nbrs.idx, state.position, state.time) if drum_wall else state.nbrs.idx
         if substeps == 1:
-            return thermal_step(extra, state.nbrs.idx)
+            return thermal_step(extra, ops)
         go = extra["k"] >= substeps
         if batch_axis is not None:
             go = jax.lax.psum(go.astype(jnp.int32), batch_axis) > 0
-        return jax.lax.cond(go, thermal_step, lambda e, _: e, extra,
-                            state.nbrs.idx)
+        return jax.lax.cond(go, thermal_step, lambda e, _: e, extra, ops)
 
     return update
+
+
+def drum_wall_step(m: ThermalModel, extra: dict, net: ContactNetwork, position, time, h: float,
+                   n_walls: int):
+    """One explicit thermal step of the particles' heat flows with a drum wall of segments
+    (``[heat.drum_wall]``, :meth:`ThermalModel.heat_flows_wall`): each particle-wall slot's
+    segment from the particle's polar angle at the step's end (``position``, time ``time``).
+    Returns the heat flow into each particle (W), the bed's accounts (W) and ``{"wall":
+    the segments' state advanced by h}`` (forward Euler, the step checked against
+    :meth:`ThermalModel.stability_limit` when the motion model is built)."""
+    pos = jnp.asarray(position, jnp.float64)
+    angle = jnp.repeat(jnp.arctan2(pos[:, 1], pos[:, 0]), n_walls)
+    net = ContactNetwork(net.pair_i, net.pair_j, net.pair_weight, net.wall_particle,
+                         net.wall_id, net.wall_weight, angle)
+    q, ext, rate, flows = m.heat_flows_wall(extra["T"], extra["wall"], net, time)
+    w = extra["wall"]
+    wall = {"T": w["T"] + h * rate, "Q": {a: w["Q"][a] + h * flows[a] for a in w["Q"]}}
+    return q, ext, {"wall": wall}
 
 
 def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
@@ -142,6 +166,8 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
            "count": {"pair": jnp.zeros(()), "wall": jnp.zeros(())}}
     if per_wall:
         out["Q_walls"] = jnp.zeros(n_walls)
+    if model.drum_wall is not None:  # [heat.drum_wall]: the segments' temperatures and accounts
+        out["wall"] = model.drum_wall.initial()
     return out
 
 

@@ -41,6 +41,7 @@ from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_
 from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.replay import Recording
 from drumheat.motion.rows import stack_arrays
+from drumheat.motion.static import drum_wall_arrays
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
 
@@ -312,9 +313,12 @@ class DEMBed(DEMMotion):
             return {"T": state["T"], "Q": state["Q"], "g": state["g"]}
         span = self.steps_per_output * self.dt
         ex = state.extra
-        return {"T": ex["T"], "Q": ex["Q"], "position": state.position,
-                "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span,
-                "mechanics": self.mechanics(state)}
+        row = {"T": ex["T"], "Q": ex["Q"], "position": state.position,
+               "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span,
+               "mechanics": self.mechanics(state)}
+        if "wall" in ex:  # [heat.drum_wall]
+            row["wall"] = ex["wall"]
+        return row
 
     def finish(self, rows, log, state) -> Trajectory:
         n_c = self.n_coupled
@@ -343,13 +347,20 @@ class DEMBed(DEMMotion):
         rec = log["recorder"]
         particles = (state["model"] if isinstance(state, dict)
                      else eqx.combine(state.extra["model"], self._skeleton)).particles
+        wall = {}
+        if "wall" in rows[0]:  # [heat.drum_wall] (no replay phase: scene/rules.py)
+            wall = drum_wall_arrays(
+                {"T": np.stack([np.asarray(r["wall"]["T"]) for r in rows]),
+                 "Q": {a: np.array([float(r["wall"]["Q"][a]) for r in rows])
+                       for a in rows[0]["wall"]["Q"]}},
+                eqx.combine(state.extra["model"], self._skeleton).drum_wall)
         return Trajectory(
             t=self.t_out, T=T, Q=Q, position=positions, diameter=self.diameter,
             mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),
             group=self.group,
             n_contacts=n_pairs, n_wall_contacts=n_wall, wall_area=d2 * cum_wall, extra=extra,
             files={"contacts.npz": rec.save} if rec is not None else {},
-            info=self.backend_info(), mechanics=self.stack_mechanics(rows))
+            info=self.backend_info(), mechanics=self.stack_mechanics(rows), drum_wall=wall)
 
     def _interfraction(self, positions) -> np.ndarray:
         """Contacts between the two groups at each output time (mixing observable), with the

@@ -139,6 +139,9 @@ class DEMMotion(AbstractMotion):
                              self.scene.name)
         if h <= limit:
             return
+        if model.drum_wall is not None:  # [heat.drum_wall]: is it the wall's segments' limit?
+            _wall_step_refusal(self.scene, model, h, limit, max(d) / min(d),
+                               min(n_heated_walls, 3))
         if substeps > 1 and self.dt <= limit:
             raise SceneError("dem.thermal_substeps", substeps,
                              f"the thermal step {substeps} x {self.dt:.3g} s = {h:.3g} s exceeds "
@@ -209,3 +212,20 @@ class DEMMotion(AbstractMotion):
                             "(dem.record_interval with dem.replay_after), fewer thermal steps "
                             "(dem.thermal_substeps), fewer outputs (run.output_interval), a "
                             "shorter run (run.duration)")
+
+
+def _wall_step_refusal(scene, model, h: float, limit: float, size_ratio: float,
+                       walls_at_once: int) -> None:
+    """Raise a :class:`SceneError` naming ``[heat.drum_wall]`` when the drum wall's segments,
+    not the particles, make the thermal step ``h`` (s) exceed the explicit ``limit`` (s)."""
+    from drumheat.thermal.model import ThermalModel
+
+    bare = ThermalModel(particles=model.particles, effects=model.effects,
+                        internal=model.internal, names=model.names)
+    if h > thermal_step_limit(bare, scene.n_particles, scene.dim, size_ratio, walls_at_once):
+        return  # the particles' own limit binds: the caller says so
+    raise SceneError("heat.drum_wall.thickness", scene.heat.drum_wall.thickness,
+                     f"the drum wall's segments make the explicit thermal limit {limit:.3g} s "
+                     f"(C_k / (A_k (U + h_i) + G), docs/models/drum-wall.md), below the thermal "
+                     f"step {h:.3g} s: a thicker wall, fewer heat.drum_wall.segments or fewer "
+                     "dem.thermal_substeps", scene.name)

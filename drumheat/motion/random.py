@@ -40,7 +40,7 @@ import numpy as np
 
 from drumheat.motion.base import register
 from drumheat.motion.rows import stack_arrays
-from drumheat.motion.static import StaticBed
+from drumheat.motion.static import StaticBed, polar_angle
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
 from drumheat.thermal.network import ContactNetwork
@@ -121,7 +121,8 @@ class RandomBed(StaticBed):
         pairs, pw, wall, ww = (contacts[k] for k in ("pairs", "pair_weight", "wall",
                                                      "wall_weight"))
         return ContactNetwork(owner[pairs[:, 0]], owner[pairs[:, 1]], pw, owner[wall],
-                              jnp.zeros(wall.shape[0], jnp.int32), ww)
+                              jnp.zeros(wall.shape[0], jnp.int32), ww,
+                              contacts.get("wall_angle"))
 
     @staticmethod
     def mix_to_mean(T, capacity):
@@ -144,10 +145,8 @@ class RandomBed(StaticBed):
         def pad(a, n):
             return jnp.concatenate([a, jnp.zeros((n - a.shape[0],) + a.shape[1:], a.dtype)])
 
-        return [dict(s, contacts={"pairs": pad(c["pairs"], n_p),
-                                  "pair_weight": pad(c["pair_weight"], n_p),
-                                  "wall": pad(c["wall"], n_w),
-                                  "wall_weight": pad(c["wall_weight"], n_w)})
+        return [dict(s, contacts={k: pad(v, n_p if k.startswith("pair") else n_w)
+                                  for k, v in c.items()})
                 for s, c in ((s, s["contacts"]) for s in states)]
 
     def shared(self) -> dict:
@@ -162,6 +161,9 @@ class RandomBed(StaticBed):
                     "pair_weight": jnp.ones(len(self._pairs)),
                     "wall": jnp.asarray(self._wall, jnp.int32),
                     "wall_weight": jnp.ones(len(self._wall))}
+        if model.drum_wall is not None:  # the positions' angles: the wall contacts' segments
+            contacts["wall_angle"] = jnp.asarray(polar_angle(self.packing.position)[self._wall],
+                                                 float)
         return {"model": model, "y": initial_state(model, T0), "contacts": contacts,
                 "owner": jnp.arange(N, dtype=jnp.int32),
                 "perms": jnp.asarray(self.perms, jnp.int32)}
@@ -180,7 +182,7 @@ class RandomBed(StaticBed):
                 if self.remix == "permute":
                     owner = owner[state["perms"][k - 1]]
                 else:
-                    y = {"T": self.mix_to_mean(y["T"], model.particles.capacity), "Q": y["Q"]}
+                    y = dict(y, T=self.mix_to_mean(y["T"], model.particles.capacity))
             y = self.solve(model, self.network(owner, state["contacts"]), y, float(a),
                                     float(b))
         return dict(state, y=y, owner=owner)

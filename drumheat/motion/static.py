@@ -25,7 +25,8 @@ from drumheat.thermal.internal import ShellStepError
 from drumheat.thermal.network import ContactNetwork, find_contacts_2d_drum
 from drumheat.thermal.solvers import ThermalStabilityError, initial_state, plan_solver
 
-__all__ = ["ThermalBed", "StaticBed", "thermal_solver", "pad_network"]
+__all__ = ["ThermalBed", "StaticBed", "thermal_solver", "pad_network", "polar_angle",
+           "drum_wall_arrays"]
 
 
 def thermal_solver(scene: Scene, model, net, T0, autodiff: str = "reverse"):
@@ -49,9 +50,30 @@ def pad_network(net: ContactNetwork, n_pairs: int, n_wall: int) -> ContactNetwor
         a = jnp.asarray(a)
         return jnp.concatenate([a, jnp.full((n - a.shape[0],) + a.shape[1:], fill, a.dtype)])
 
+    angle = None if net.wall_angle is None else pad(net.wall_angle, n_wall, 0.0)
     return ContactNetwork(pad(net.pair_i, n_pairs, 0), pad(net.pair_j, n_pairs, 0),
                           pad(net.pair_weight, n_pairs, 0.0), pad(net.wall_particle, n_wall, 0),
-                          pad(net.wall_id, n_wall, 0), pad(net.wall_weight, n_wall, 0.0))
+                          pad(net.wall_id, n_wall, 0), pad(net.wall_weight, n_wall, 0.0), angle)
+
+
+def polar_angle(position) -> np.ndarray:
+    """Polar angle of each position about the drum axis (counter-clockwise from +x), rad; the
+    drum wall's segments are found from it (:mod:`drumheat.thermal.drum_wall`)."""
+    position = np.asarray(position, float)
+    return np.arctan2(position[:, 1], position[:, 0])
+
+
+def drum_wall_arrays(rows: dict, drum_wall) -> dict:
+    """The drum wall's part of a :class:`Trajectory` (``Trajectory.drum_wall``) from the
+    stacked output rows of its state ``{"T": (n_out, n_seg), "Q": {"outside", "gas"}}``:
+    ``T`` (n_out, n_seg) K, ``Q_outside`` and ``Q_gas`` (n_out,) J since t = 0 (in from
+    outside, out to the free gas), ``capacity`` (n_seg,) J/K and ``area`` (n_seg,) m2."""
+    n = drum_wall.n_segments
+    return {"T": np.asarray(rows["T"], float),
+            "Q_outside": np.asarray(rows["Q"]["outside"], float),
+            "Q_gas": np.asarray(rows["Q"]["gas"], float),
+            "capacity": np.full(n, float(drum_wall.capacity)),
+            "area": np.full(n, float(drum_wall.area))}
 
 
 class ThermalBed(AbstractMotion):
@@ -116,6 +138,8 @@ class ThermalBed(AbstractMotion):
 
     def observe(self, state) -> dict:
         model, y = state["model"], state["y"]
+        if model.drum_wall is not None:
+            return {"T": y["T"], "Q": y["Q"], "wall": y["wall"]}
         if model.internal is None:
             return {"T": y["T"], "Q": y["Q"]}
         return {"T": model.internal.mean_temperature(y["T"]), "Q": y["Q"],
@@ -131,6 +155,8 @@ class ThermalBed(AbstractMotion):
                    group=assemble.group_index(self.scene))
         if "stored_heat" in r:
             out["stored_heat"] = r["stored_heat"] - r["stored_heat"][0]
+        if "wall" in r:
+            out["drum_wall"] = drum_wall_arrays(r["wall"], model.drum_wall)
         return out
 
 
@@ -158,6 +184,11 @@ class StaticBed(ThermalBed):
                                             scene.drum.diameter, gap_pp, wall_tolerance=gap_pw)
         self.pairs, self.wall_particles = pairs, wall
         self.net = ContactNetwork.from_arrays(pairs, wall)
+        if scene.heat.drum_wall is not None:  # each wall contact's angle: its wall segment
+            n = self.net
+            self.net = ContactNetwork(n.pair_i, n.pair_j, n.pair_weight, n.wall_particle,
+                                      n.wall_id, n.wall_weight, jnp.asarray(
+                                          polar_angle(self.packing.position)[wall], float))
         model, T0 = self.model()
         self.solver = thermal_solver(scene, model, self.net, T0)
 

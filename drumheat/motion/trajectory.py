@@ -46,6 +46,11 @@ class Trajectory:
         ``force``, ``coordination``, ``wall_contacts`` as ``(n_out, N, ...)`` float32 arrays
         (:func:`drumheat.mechanics.analysis.particle_mechanics`); NaN at outputs without
         mechanics (a replay). Empty for motion models without a DEM.
+    drum_wall : dict
+        A drum wall with heat capacity (``[heat.drum_wall]``): segment temperatures ``T``
+        (n_out, n_seg) K, heat ``Q_outside`` in from outside and ``Q_gas`` out to the free gas
+        since t = 0 (n_out,) J, segment ``capacity`` (n_seg,) J/K and ``area`` (n_seg,) m2.
+        Empty without one.
     records : dict
         Further arrays of the run for analysis (e.g. the flow counters of a moving bed at the
         output times); not written to files.
@@ -68,3 +73,4 @@ class Trajectory:
     info: dict = field(default_factory=dict)
     records: dict = field(default_factory=dict)
     mechanics: dict = field(default_factory=dict)
+    drum_wall: dict = field(default_factory=dict)

@@ -264,6 +264,19 @@ def write_folder(out: str | Path, fill) -> Path:
     return out
 
 
+def write_drum_wall(path, traj) -> None:
+    """``wall.npz`` of a run with ``[heat.drum_wall]``: ``t`` (n_out,) s, ``T_wall`` (n_out,
+    n_seg) K (segment k spans polar angles ``angle_edges[k]`` to ``angle_edges[k + 1]``, rad,
+    in the drum's frame: from +x at t = 0), ``angle_edges`` (n_seg + 1,), ``capacity`` and
+    ``area`` (n_seg,) J/K and m2, ``Q_outside`` and ``Q_gas`` (n_out,) J since t = 0."""
+    w = traj.drum_wall
+    n = w["T"].shape[1]
+    np.savez_compressed(path, t=traj.t, T_wall=w["T"],
+                        angle_edges=np.linspace(0.0, 2.0 * np.pi, n + 1),
+                        capacity=w["capacity"], area=w["area"], Q_outside=w["Q_outside"],
+                        Q_gas=w["Q_gas"])
+
+
 def write_results(result, out_dir=None, figures: bool = True, figure_formats=("png",),
                   dpi: int = 120) -> Path:
     """Write a :class:`drumheat.runner.Result` to ``out_dir`` atomically; returns the folder.
@@ -291,6 +304,8 @@ def write_results(result, out_dir=None, figures: bool = True, figure_formats=("p
                       **traj.mechanics)
         np.savez_compressed(tmp / "particles.npz", **arrays)
         (tmp / "scene.toml").write_text(result.scene.to_toml())
+        if traj.drum_wall:  # segment temperatures of a drum wall with heat capacity
+            write_drum_wall(tmp / "wall.npz", traj)
         for name, writer in traj.files.items():  # the motion model's own files
             writer(tmp / name)
         if figures:

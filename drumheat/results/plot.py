@@ -646,6 +646,49 @@ def plot_alpha_overall(result, ax=None, smooth=None):
     return fig
 
 
+def plot_drum_wall(result, times=None, ax=None):
+    """The drum wall's segment temperatures (``[heat.drum_wall]``).
+
+    Left: temperature of every segment against its angle in the drum's own frame (segment k
+    spans ``[k, k + 1) x 360/n_seg`` degrees from +x at t = 0) at a few times
+    (:func:`pick_times`, or the outputs nearest to ``times``, s). Right: the segments' mean,
+    minimum and maximum and the bed's mean temperature over time.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    w = result.trajectory.drum_wall
+    if not w:
+        raise ValueError(f"{result.scene.name}: no drum wall with heat capacity in this run; "
+                         "it needs [heat.drum_wall]")
+    t, Tw = result.t, np.asarray(w["T"])
+    n = Tw.shape[1]
+    idx = pick_times(t) if times is None else nearest_indices(t, times)
+    fig, (a0, a1) = _fig_axes2(ax, (11, 4.2), ncols=2)
+    centre = (np.arange(n) + 0.5) * 360.0 / n
+    for k, i in enumerate(idx):
+        a0.step(np.append(centre - 180.0 / n, 360.0), np.append(Tw[i], Tw[i][-1]), where="post",
+                color=f"C{k % 10}", label=format_clock(t[i]))
+    a0.set_xlabel("segment angle in the drum frame / deg")
+    a0.set_ylabel("wall temperature / K")
+    a0.set_xlim(0, 360)
+    a0.legend(fontsize="small")
+    a0.grid(alpha=0.3)
+    ts = result.timeseries
+    a1.plot(t, ts["T_wall_mean"], "C3-", label="wall, mean of segments")
+    a1.fill_between(t, ts["T_wall_min"], ts["T_wall_max"], color="C3", alpha=0.2,
+                    label="wall, min-max of segments")
+    a1.plot(t, ts["T_mean"], "C0-", label="bed, mean")
+    a1.set_xlabel("time / s")
+    a1.set_ylabel("temperature / K")
+    a1.legend(fontsize="small")
+    a1.grid(alpha=0.3)
+    fig.suptitle(f"{result.scene.name}: drum wall ({n} segments)")
+    fig.tight_layout()
+    return fig
+
+
 # ---------------------------------------------------------------------------------------------
 # Cross-sections
 # ---------------------------------------------------------------------------------------------
@@ -870,6 +913,7 @@ FIGURES = {
     "alpha_overall": plot_alpha_overall,
     "snapshot": plot_snapshot,
     "contact_network": plot_contact_network,
+    "drum_wall": plot_drum_wall,
 }
 
 
@@ -881,7 +925,7 @@ def plot(result, kind: str = "mean_temperatures", **kwargs):
     result : Result, or a result folder (path) for ``"snapshot"`` and ``"contact_network"``
     kind : str
         One of ``"mean_temperatures"`` (default), ``"distributions"``, ``"alpha_overall"``,
-        ``"snapshot"``, ``"contact_network"`` (:data:`FIGURES`).
+        ``"snapshot"``, ``"contact_network"``, ``"drum_wall"`` (:data:`FIGURES`).
     **kwargs
         Passed to the ``plot_<kind>`` function (e.g. ``ax``, ``index``, ``data``).
 
@@ -924,6 +968,8 @@ def save_figures(result, folder, formats=("png",), dpi: int = 120) -> list[Path]
             "temperature_distributions": plot_distributions(result)}
     if "alpha_overall" in result.timeseries:
         figs["alpha_overall"] = plot_alpha_overall(result)
+    if result.trajectory.drum_wall:
+        figs["drum_wall"] = plot_drum_wall(result)
     if result.scene.dim == 2 or (result.scene.drum is not None
                                  and result.scene.motion.model in ("dem", "replay")):
         figs["snapshot_final"] = plot_snapshot(result, -1)  # 3D: the mid-depth slice

@@ -22,7 +22,8 @@ from drumheat.results.equalisation import equalisation_times
 from drumheat.results.files import write_results
 from drumheat.scene import Scene
 
-__all__ = ["Result", "make_result", "build_timeseries", "energy_balance"]
+__all__ = ["Result", "make_result", "build_timeseries", "energy_balance", "drum_wall_balance",
+           "drum_wall_accounts"]
 
 
 @dataclass
@@ -83,7 +84,14 @@ def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
     ``scale = sum_i m_i c_i |T_i(0) - T_mean(0)| + max |Q_account|`` (the heat that moved inside
     the bed plus the heat exchanged with the outside). Where the trajectory carries
     ``stored_heat`` (particles with radial shells) the stored-heat change is taken from it.
+
+    With a drum wall of its own heat capacity (``traj.drum_wall``) the balance is that of bed
+    and wall together (:func:`drum_wall_balance`): the wall -> bed heat then cancels, and
+    ``residual = stored(bed) + stored(wall) - (Q_outside - Q_wall->gas + the bed's other
+    accounts)``; the scale adds the largest of the wall's accounts.
     """
+    if traj.drum_wall:
+        return drum_wall_balance(traj)
     if traj.stored_heat is not None:  # particles with shells: from the shell enthalpies
         stored = np.asarray(traj.stored_heat, float)
     else:
@@ -93,6 +101,34 @@ def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
     T0 = traj.T[0]
     scale = float(np.sum(traj.capacity * np.abs(T0 - np.average(T0, weights=traj.capacity))))
     scale += sum(float(np.max(np.abs(q))) for q in traj.Q.values())
+    rel = float(np.max(np.abs(residual)) / scale) if scale > 0 else float(np.max(np.abs(residual)))
+    return residual, rel
+
+
+def drum_wall_accounts(traj: Trajectory) -> dict[str, np.ndarray]:
+    """The drum wall's heat accounts since t = 0, J, (n_out,) each: ``outside`` (in from
+    outside), ``bed`` (wall -> bed: the bed's ``wall`` account), ``gas`` (wall -> free gas) and
+    ``stored`` (change of the wall's stored heat, ``sum_k C_k (T_k(t) - T_k(0))``)."""
+    w = traj.drum_wall
+    stored = (w["T"] - w["T"][0]) @ w["capacity"]
+    return {"outside": w["Q_outside"], "bed": traj.Q.get("wall", np.zeros_like(stored)),
+            "gas": w["Q_gas"], "stored": stored}
+
+
+def drum_wall_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
+    """Energy balance of bed and drum wall together (see :func:`energy_balance`):
+    ``(residual_J (n_out,), rel_error)`` with ``residual = stored(bed) + stored(wall) -
+    (Q_outside - Q_wall->gas + sum of the bed's accounts other than wall)``. The wall's own
+    balance ``stored(wall) = Q_outside - Q_wall->bed - Q_wall->gas`` and the bed's
+    ``stored(bed) = sum of the bed's accounts`` add up to it."""
+    w = drum_wall_accounts(traj)
+    stored = (traj.T - traj.T[0]) @ traj.capacity + w["stored"]
+    bed_other = sum((q for a, q in traj.Q.items() if a != "wall"), np.zeros_like(stored))
+    residual = stored - (w["outside"] - w["gas"] + bed_other)
+    T0 = traj.T[0]
+    scale = float(np.sum(traj.capacity * np.abs(T0 - np.average(T0, weights=traj.capacity))))
+    scale += sum(float(np.max(np.abs(q))) for q in traj.Q.values())
+    scale += sum(float(np.max(np.abs(w[a]))) for a in ("outside", "gas", "stored"))
     rel = float(np.max(np.abs(residual)) / scale) if scale > 0 else float(np.max(np.abs(residual)))
     return residual, rel
 
@@ -109,7 +145,10 @@ def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
     surfaces = sorted(a for a in traj.Q if a.startswith("wall:"))
     if surfaces:  # a drum with internals: the total here, each surface (Q_wall:<surface>) below
         cols["Q_wall"] = sum(traj.Q[a] for a in surfaces)
-    if "wall" in traj.Q and scene.drum is not None and scene.drum.wall_temperature is not None:
+    if traj.drum_wall:  # a drum wall with heat capacity: its temperatures and accounts
+        cols.update(drum_wall_columns(traj))
+    elif ("wall" in traj.Q and scene.drum is not None
+          and scene.drum.wall_temperature is not None):
         T_cap = traj.T @ traj.capacity / traj.capacity.sum()
         # eq. [1.10] times A: the bed's conductance, free of any area convention
         alpha_A = np.asarray(observe.alpha_overall(
@@ -127,6 +166,21 @@ def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
     for name, values in traj.extra.items():
         cols[name] = values
     return pd.DataFrame(cols)
+
+
+def drum_wall_columns(traj: Trajectory) -> dict[str, np.ndarray]:
+    """Time-series columns of a drum wall with heat capacity: ``T_wall_mean``, ``T_wall_min``,
+    ``T_wall_max`` (K, over the segments; the mean weighted by capacity) and its accounts
+    since t = 0 (J): ``Q_outside`` (outside -> wall), ``Q_wall_gas`` (wall -> free gas),
+    ``Q_wall_stored`` (change of the wall's stored heat); wall -> bed is ``Q_wall``. The
+    segment temperatures themselves are in ``wall.npz``. eq. [1.10]'s alpha_overall needs a
+    fixed wall temperature and is not written."""
+    w = traj.drum_wall
+    acc = drum_wall_accounts(traj)
+    return {"T_wall_mean": w["T"] @ w["capacity"] / w["capacity"].sum(),
+            "T_wall_min": w["T"].min(axis=1), "T_wall_max": w["T"].max(axis=1),
+            "Q_outside": acc["outside"], "Q_wall_gas": acc["gas"],
+            "Q_wall_stored": acc["stored"]}
 
 
 def peak_memory_mb() -> float:

@@ -45,6 +45,8 @@ CHECK_FILES: contextvars.ContextVar = contextvars.ContextVar("drumheat_check_fil
 
 def check_scene(s) -> None:
     """Every cross-table rule of scene ``s``; raises :class:`SceneError` naming the key."""
+    if s.heat.drum_wall is not None:  # first: it names the motion models that carry it
+        _check_drum_wall(s)
     _check_consistency(s)
     if s.dem is not None:
         _check_dem(s)
@@ -484,6 +486,51 @@ def _check_new_effects(s) -> None:
         raise SceneError("heat.internal.melting_temperature" if i.melting_temperature is None
                          else "heat.internal.latent_heat", REQUIRED,
                          "latent heat needs both latent_heat (J/kg) and melting_temperature (K)", n)
+
+
+#: motion models that carry a drum wall with heat capacity ([heat.drum_wall])
+DRUM_WALL_MOTION_MODELS = ("static", "random", "dem")
+
+
+def _check_drum_wall(s) -> None:
+    """Rules of ``[heat.drum_wall]`` (docs/models/drum-wall.md): which motion models carry the
+    wall, what it needs from the other tables, and the keys of its ``outside`` choice."""
+    n, w = s.name, s.heat.drum_wall
+    key = "heat.drum_wall"
+    if s.motion.model not in DRUM_WALL_MOTION_MODELS:
+        raise SceneError("motion.model", s.motion.model, "[heat.drum_wall] is carried by the "
+                         "motion models " + ", ".join(DRUM_WALL_MOTION_MODELS) + "; leave "
+                         "[heat.drum_wall] out for a wall of fixed temperature", n)
+    if s.drum is None or s.drum.wall_temperature is None:
+        raise SceneError("drum.wall_temperature", REQUIRED, "[heat.drum_wall] needs the "
+                         "initial wall temperature drum.wall_temperature, in K", n)
+    if s.drum.has_internals:
+        raise SceneError("drum.sections" if s.drum.sections else "drum.inner_diameter",
+                         s.drum.sections or s.drum.inner_diameter, "[heat.drum_wall] is a "
+                         "plain drum's shell; internals with a drum wall are not supported", n)
+    if s.heat.wall is None:
+        raise SceneError("heat.wall", REQUIRED, "[heat.drum_wall] gives its heat to the bed "
+                         "through the particle-wall contact law: add [heat.wall]", n)
+    if s.heat.internal is not None:
+        raise SceneError("heat.internal", "given", "[heat.drum_wall] with radial shells in the "
+                         "particles is not supported; leave one of them out", n)
+    if s.dem is not None and s.dem.replay_after is not None:
+        raise SceneError("dem.replay_after", s.dem.replay_after, "the replay after "
+                         "dem.replay_after does not carry the drum wall of [heat.drum_wall]; "
+                         "leave dem.replay_after out", n)
+    if w.inner_alpha > 0 and s.gas is None:
+        raise SceneError("gas.temperature", REQUIRED, "heat.drum_wall.inner_alpha > 0 needs "
+                         "the temperature of the free gas in the drum, in K ([gas])", n)
+    needs = {"flux": ("outer_flux",), "gas": ("outer_alpha", "outer_temperature"),
+             "temperature": ("outer_temperature",)}[w.outside]
+    for k in ("outer_flux", "outer_alpha", "outer_temperature"):
+        v = getattr(w, k)
+        if k in needs and v is None:
+            raise SceneError(f"{key}.{k}", REQUIRED, f"outside = {w.outside!r} needs "
+                             + " and ".join(needs), n)
+        if k not in needs and v is not None:
+            raise SceneError(f"{key}.{k}", v, f"outside = {w.outside!r} does not use {k}; "
+                             "leave it out (it needs " + " and ".join(needs) + ")", n)
 
 
 def _check_pneumatic(s) -> None:

@@ -232,6 +232,53 @@ class LossConfig(Table):
     alphaA: float = spec(unit="W/K", ge=0, doc="(alpha A)_WK per particle.")
 
 
+DRUM_WALL_OUTSIDE = ("flux", "gas", "temperature")
+
+
+@dataclass(frozen=True)
+class DrumWallConfig(Table):
+    """``[heat.drum_wall]``: a drum wall with its own heat capacity, in segments turning with
+    the drum (docs/models/drum-wall.md). Absent: the wall is the fixed ``drum.wall_temperature``."""
+
+    TABLE = "heat.drum_wall"
+
+    thickness: float = spec(unit="m", gt=0, le=0.5,
+                            doc="Wall thickness s; the wall stores (s rho c_p) J/(m2 K) and "
+                                "conducts lambda/s W/(m2 K) through its thickness.")
+    material: str = spec("steel", choices=tuple(sorted(MATERIALS)),
+                         doc="Wall material from the library (drumheat.materials).")
+    density: Optional[float] = spec(None, unit="kg/m3", gt=0, doc="Overrides the material's.")
+    heat_capacity: Optional[float] = spec(None, unit="J/(kg K)", gt=0,
+                                          doc="Overrides the material's.")
+    conductivity: Optional[float] = spec(None, unit="W/(m K)", gt=0,
+                                         doc="Overrides the material's.")
+    segments: int = spec(36, ge=1, le=3600,
+                         doc="Number of wall segments around the circumference; they turn "
+                             "with the drum (segment k spans polar angles [k, k + 1) x 360/"
+                             "segments degrees from +x at t = 0). Each segment has one "
+                             "temperature; its initial value is drum.wall_temperature.")
+    outside: str = spec(choices=DRUM_WALL_OUTSIDE,
+                        doc="How the wall is heated from outside: 'flux' (outer_flux, W/m2), "
+                            "'gas' (a hot gas: outer_alpha and outer_temperature, in series "
+                            "with the wall's lambda/s) or 'temperature' (a fixed outer surface "
+                            "temperature outer_temperature, through the wall's lambda/s).")
+    outer_flux: Optional[float] = spec(None, unit="W/m2",
+                                       doc="Heat flux into the outer surface (outside = "
+                                           "'flux'); negative cools.")
+    outer_temperature: Optional[float] = spec(None, unit="K", gt=0,
+                                              doc="Hot-gas temperature (outside = 'gas') or "
+                                                  "outer surface temperature (outside = "
+                                                  "'temperature').")
+    outer_alpha: Optional[float] = spec(None, unit="W/(m2 K)", gt=0,
+                                        doc="Heat-transfer coefficient hot gas -> outer surface "
+                                            "(outside = 'gas').")
+    inner_alpha: float = spec(0.0, unit="W/(m2 K)", ge=0,
+                              doc="Heat-transfer coefficient wall -> free gas inside the drum "
+                                  "(temperature gas.temperature), on the part of each segment "
+                                  "the bed does not cover (covered: d^2 per touching particle, "
+                                  "the wall_area of eq. [1.10]); 0: none.")
+
+
 CONVECTION_CORRELATIONS = ("constant", "gnielinski", "gnielinski-staltner", "ranz-marshall",
                            "fluidized-bed", "gnielinski-kraychev")
 
@@ -383,6 +430,9 @@ class HeatConfig(Table):
     radiation: Optional[RadiationConfig] = spec(None, doc="Radiation to an enclosure.")
     internal: Optional[InternalConfig] = spec(None, doc="Conduction inside the particles "
                                                         "(radial shells).")
+    drum_wall: Optional[DrumWallConfig] = spec(None, doc="A drum wall with its own heat "
+                                                         "capacity (segments turning with the "
+                                                         "drum), heated from outside.")
 
     def effects(self) -> tuple[str, ...]:
         """Names of the effects this scene switches on."""

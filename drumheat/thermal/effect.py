@@ -26,7 +26,7 @@ from jax import Array
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
 
-__all__ = ["AbstractEffect", "EffectContext", "GasState", "PlugFlow", "TableValues", "EFFECTS",
+__all__ = ["AbstractEffect", "DrumGeometry", "EffectContext", "GasState", "PlugFlow", "TableValues", "EFFECTS",
            "register"]
 
 
@@ -88,6 +88,17 @@ class PlugFlow(NamedTuple):
     n_layers: int
 
 
+class DrumGeometry(NamedTuple):
+    """The drum as a drum wall with segments needs it (``[heat.drum_wall]``): inner
+    ``radius`` (m), ``depth`` (m) of the wall a segment spans along the axis (3D: the slice's
+    ``drum.depth``; 2D: the monolayer's mean particle diameter) and ``rpm`` (1/min, positive
+    counter-clockwise seen from +z)."""
+
+    radius: float
+    depth: float
+    rpm: float
+
+
 class EffectContext(NamedTuple):
     """What an effect may know besides its own table (assembled from the scene).
 
@@ -122,6 +133,8 @@ class EffectContext(NamedTuple):
         A particle density was given in the scene (not the material library's).
     name : str
         The scene's name, for warnings.
+    drum : DrumGeometry or None
+        The drum, where a drum wall with segments needs it (``[heat.drum_wall]``).
     """
 
     particles: ThermalParticles
@@ -138,6 +151,7 @@ class EffectContext(NamedTuple):
     plug_flow: Optional[PlugFlow] = None
     density_given: bool = False
     name: str = ""
+    drum: Optional[DrumGeometry] = None
 
 
 class AbstractEffect(eqx.Module):

@@ -32,6 +32,10 @@ class ContactNetwork(eqx.Module):
         Index of the wall touched (into the wall-temperature array of the wall effect).
     wall_weight : float array, shape (W,)
         Contact-time fraction in [0, 1]; 0 marks an unused slot.
+    wall_angle : float array, shape (W,), or None
+        Polar angle of each particle-wall contact in the lab frame, rad (counter-clockwise
+        from +x); set only for a drum wall with segments (``[heat.drum_wall]``,
+        :mod:`drumheat.thermal.drum_wall`), which finds each contact's segment from it.
     """
 
     pair_i: Array
@@ -40,6 +44,7 @@ class ContactNetwork(eqx.Module):
     wall_particle: Array
     wall_id: Array
     wall_weight: Array
+    wall_angle: Array | None = None
 
     @property
     def n_pairs(self) -> Array:

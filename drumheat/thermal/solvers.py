@@ -45,13 +45,26 @@ def initial_state(model: ThermalModel, T0) -> dict:
     T0 = jnp.asarray(T0, float)
     if model.internal is not None and T0.ndim == 1:
         T0 = model.internal.initial(T0)
-    return {"T": T0, "Q": {a: jnp.zeros((), T0.dtype) for a in model.accounts}}
+    y = {"T": T0, "Q": {a: jnp.zeros((), T0.dtype) for a in model.accounts}}
+    if model.drum_wall is not None:  # the drum wall's segments (drumheat.thermal.drum_wall)
+        y["wall"] = model.drum_wall.initial()
+    return y
 
 
 def _vector_field(t, y, args):
     model, net = args
+    if model.drum_wall is not None:
+        return _wall_vector_field(t, y, model, net)
     q, external = model.heat_flows(y["T"], net)
     return {"T": q / model.particles.capacity, "Q": external}
+
+
+def _wall_vector_field(t, y, model, net):
+    """The right-hand side with the drum wall's segments (``y["wall"]``): particle and segment
+    temperatures and the bed's and the wall's accounts (:meth:`ThermalModel.heat_flows_wall`)."""
+    q, external, rate, wall_flows = model.heat_flows_wall(y["T"], y["wall"], net, t)
+    return {"T": q / model.particles.capacity, "Q": external,
+            "wall": {"T": rate, "Q": wall_flows}}
 
 
 @eqx.filter_jit
@@ -90,6 +103,18 @@ def _euler_scan(model, net, y, h, n_steps: int):
     return y
 
 
+@eqx.filter_jit
+def _euler_scan_timed(model, net, y, t0, h, n_steps: int):
+    """:func:`_euler_scan` for a right-hand side that depends on time (the drum wall's
+    segments turn with the drum): step k is evaluated at ``t0 + k h``."""
+    def body(y, k):
+        dy = _vector_field(t0 + k * h, y, (model, net))
+        return jax.tree_util.tree_map(lambda a, b: a + h * b, y, dy), None
+
+    y, _ = jax.lax.scan(body, y, jnp.arange(n_steps, dtype=jnp.float64))
+    return y
+
+
 def advance_explicit(model: ThermalModel, net: ContactNetwork, y, t0: float, t1: float,
                      dt: float):
     """Advance from t0 to t1 with forward Euler steps no larger than ``dt``.
@@ -98,6 +123,8 @@ def advance_explicit(model: ThermalModel, net: ContactNetwork, y, t0: float, t1:
     (:func:`check_explicit_step`).
     """
     n, h = explicit_steps(t0, t1, dt)
+    if model.drum_wall is not None:
+        return _euler_scan_timed(model, net, y, jnp.asarray(t0, float), jnp.asarray(h, float), n)
     return _euler_scan(model, net, y, h, n)
 
 
