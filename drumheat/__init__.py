@@ -41,7 +41,8 @@ _API = {
     **{name: "drumheat.scene" for name in (
         "RunConfig", "DrumConfig", "GroupConfig", "GasConfig", "HeatConfig", "ContactConfig",
         "WallConfig", "LossConfig", "ConvectionConfig", "RadiationConfig", "RadiationSurface",
-        "InternalConfig", "MotionConfig", "PackingConfig", "DEMConfig", "ReplayConfig",
+        "InternalConfig", "FrictionConfig", "MotionConfig", "PackingConfig", "DEMConfig",
+        "ReplayConfig",
         "GranulatorConfig", "ChannelConfig", "HopperConfig")},
     # running
     "run": "drumheat.runner.loop", "run_ensemble": "drumheat.runner.ensemble",

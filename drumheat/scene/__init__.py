@@ -16,10 +16,10 @@ from drumheat.scene.rules import (DRUM_MOTION_MODELS, MOTION_MODEL_NAMES,
                                   check_apparatus_tables, check_scene)
 from drumheat.scene.spec import REQUIRED, SceneError, Table, parse_override, spec, to_dict
 from drumheat.scene.tables import (CONVECTION_CORRELATIONS, ChannelConfig, ContactConfig,
-                                   ConvectionConfig, DEMConfig, DrumConfig, GasConfig,
-                                   GranulatorConfig, GroupConfig, HeatConfig, HopperConfig,
-                                   InternalConfig, LossConfig, MotionConfig, PackingConfig,
-                                   RadiationConfig, RadiationSurface, ReplayConfig, RunConfig,
+                                   ConvectionConfig, DEMConfig, DrumConfig, FrictionConfig,
+                                   GasConfig, GranulatorConfig, GroupConfig, HeatConfig,
+                                   HopperConfig, InternalConfig, LossConfig, MotionConfig,
+                                   PackingConfig, RadiationConfig, RadiationSurface, ReplayConfig, RunConfig,
                                    Scene, WallConfig, iter_keys)
 
 __all__ = [
@@ -28,6 +28,6 @@ __all__ = [
     "check_apparatus_tables", "MOTION_MODEL_NAMES", "DRUM_MOTION_MODELS",
     "CONVECTION_CORRELATIONS", "RunConfig", "DrumConfig", "GroupConfig", "GasConfig",
     "HeatConfig", "ContactConfig", "WallConfig", "LossConfig", "ConvectionConfig",
-    "RadiationConfig", "RadiationSurface", "InternalConfig", "MotionConfig", "PackingConfig",
-    "DEMConfig", "ReplayConfig", "GranulatorConfig", "ChannelConfig", "HopperConfig",
+    "RadiationConfig", "RadiationSurface", "InternalConfig", "FrictionConfig", "MotionConfig",
+    "PackingConfig", "DEMConfig", "ReplayConfig", "GranulatorConfig", "ChannelConfig", "HopperConfig",
 ]
