@@ -41,8 +41,8 @@ _API = {
     **{name: "drumheat.scene" for name in (
         "RunConfig", "DrumConfig", "GroupConfig", "GasConfig", "HeatConfig", "ContactConfig",
         "WallConfig", "LossConfig", "ConvectionConfig", "RadiationConfig", "RadiationSurface",
-        "InternalConfig", "MotionConfig", "PackingConfig", "DEMConfig", "ReplayConfig",
-        "GranulatorConfig", "ChannelConfig", "HopperConfig", "EntranceConfig")},
+        "InternalConfig", "FrictionConfig", "MotionConfig", "PackingConfig", "DEMConfig",
+        "ReplayConfig", "GranulatorConfig", "ChannelConfig", "HopperConfig", "EntranceConfig")},
     # running
     "run": "drumheat.runner.loop", "run_ensemble": "drumheat.runner.ensemble",
     "EnsembleResult": "drumheat.runner.ensemble", "Result": "drumheat.results.result",

@@ -25,6 +25,7 @@ from drumheat.materials import material
 from drumheat.mechanics import ContactParams, Particles, contact_params
 from drumheat.mechanics import make_particles as mechanical_particles
 from drumheat.mechanics.deposition import Packing, deposit_2d
+from drumheat.mechanics.dissipation import FrictionHeat
 from drumheat.models.soft_sphere import default_time_step
 from drumheat.scene import Scene, SceneError
 from drumheat.scene.rules import dem_critical_time_step, dem_stiffness
@@ -360,6 +361,20 @@ def dem_setup(scene: Scene) -> DEMSetup:
         particles=particles, params=params, k_n=k_n, t_crit=t_crit, dt=dt, dt_origin=dt_origin,
         dtype=jnp.float32 if cfg.precision == "float32" else jnp.float64, gravity=gravity,
         density=density, conduction_gap=conduction_gaps(scene))
+
+
+def friction_heat(scene: Scene) -> FrictionHeat | None:
+    """The :class:`~drumheat.mechanics.dissipation.FrictionHeat` of ``[heat.friction]``
+    (None without the table): each particle's conductivity (its group's material or override)
+    and the walls' (``wall_material``) for partition ``"conductivity"``, none for ``"half"``."""
+    cfg = scene.heat.friction
+    if cfg is None:
+        return None
+    if cfg.partition == "half":
+        return FrictionHeat()
+    value = scene_values(scene)
+    return FrictionHeat(conductivity=np.asarray(particle_property(scene, value, "conductivity")),
+                        wall_conductivity=float(material(cfg.wall_material).conductivity))
 
 
 def conduction_gaps(scene: Scene) -> tuple[float, float]:

@@ -53,6 +53,8 @@ __all__ = [
     "ContactResult",
     "cross_w_a",
     "cross_a_f",
+    "rolling_torque",
+    "rolling_loss",
 ]
 
 
@@ -289,9 +291,14 @@ class ContactResult(NamedTuple):
     normal_force: jax.Array  # (...,) clipped normal force magnitude (N)
     spring: jax.Array  # (..., dim) updated tangential spring xi (m)
     sliding: jax.Array  # (...,) bool: Coulomb limit reached
+    # with ``dissipation=True`` (else None): mechanical energy the contact dissipated in this
+    # step (J, >= 0), :func:`contact_law`
+    damping_loss: jax.Array | None = None  # (...,) in the normal and tangential dashpots
+    slip_loss: jax.Array | None = None  # (...,) by the Coulomb limit (sliding, release)
 
 
-def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt, active):
+def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt, active,
+                dissipation: bool = False):
     """Linear spring-dashpot contact with Cundall-Strack tangential history (one step).
 
     Args (arrays broadcast over contacts, vectors have a trailing dim axis):
@@ -302,6 +309,21 @@ def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt
       m_eff: effective mass m* (kg). kn, kt (N/m), zeta_n, zeta_t (-), mu (-).
       spring: tangential spring xi from the previous step (m).
       dt: time step (s). active: bool, the contact exists (delta > 0 and a valid pair).
+      dissipation: also return the mechanical energy the contact dissipated in the step (J),
+        split as the heat sources of friction heating (:mod:`drumheat.mechanics.dissipation`):
+
+        * ``damping_loss``: the dashpots, ``(k_n delta - F_n) v_n dt`` (``gamma_n v_n^2 dt``
+          while the normal force is not clipped; while it is clipped at zero the dashpot
+          cancels the spring and takes the spring's release ``k_n delta v_n dt``) plus
+          ``gamma_t |v_t|^2 dt`` while the contact sticks;
+        * ``slip_loss``: while the contact slides, the Coulomb force times the slip of the
+          step, ``mu F_n |xi_trial - xi|`` (the part of the tangential displacement the spring
+          does not take); when the contact opens, the energy left in its tangential spring,
+          ``k_t |xi_old|^2 / 2``, which the model discards.
+
+        These are the rates of the continuous law (PFC's dashpot and slip energies, Itasca PFC
+        manual, "energy partitions") at the step's velocities; the exact loss of the discrete
+        step is :func:`drumheat.mechanics.dissipation.step_heat`.
 
     Returns a :class:`ContactResult` with the force acting on B (A receives the opposite).
     See the module docstring for the equations.
@@ -318,6 +340,7 @@ def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt
     len_p = _norm(xi_p)
     scale = jnp.where(len_p > 0, len_old / jnp.where(len_p > 0, len_p, 1.0), 1.0)
     xi = xi_p * scale[..., None] + vt * dt
+    xi_trial = xi
     fs = -kt[..., None] * xi if jnp.ndim(kt) else -kt * xi
     fs_len = _norm(fs)
     f_coul = mu * fn
@@ -331,9 +354,16 @@ def contact_law(n, overlap, v_rel, m_eff, kn, kt, zeta_n, zeta_t, mu, spring, dt
     ft = jnp.where(slide[..., None], fs_lim, fs - gt_b * vt)
     act = active[..., None]
     ft = jnp.where(act, ft, 0.0)
-    xi = jnp.where(act, xi, 0.0)
+    xi_new = jnp.where(act, xi, 0.0)
     force = fn[..., None] * n + ft
-    return ContactResult(force, fn, xi, slide & active)
+    if not dissipation:
+        return ContactResult(force, fn, xi_new, slide & active)
+    damping = ((kn * overlap - fn) * vn
+               + jnp.where(slide, 0.0, gt * jnp.sum(vt * vt, axis=-1))) * dt
+    slip = jnp.where(slide, f_coul * _norm(xi_trial - xi), 0.0)
+    release = 0.5 * jnp.broadcast_to(kt, fn.shape) * jnp.sum(spring * spring, axis=-1)
+    return ContactResult(force, fn, xi_new, slide & active, jnp.where(active, damping, 0.0),
+                         jnp.where(active, slip, release))
 
 
 def rolling_torque(w_rel, fn, r_eff, mu_r, inertia_eff, dt):
@@ -355,3 +385,20 @@ def rolling_torque(w_rel, fn, r_eff, mu_r, inertia_eff, dt):
     cap = jnp.minimum(mu_r * r_eff * fn, inertia_eff * mag / dt)
     safe = jnp.where(mag > 0, mag, 1.0)
     return -(cap / safe)[..., None] * w_rel
+
+
+def rolling_loss(m_r, w_rel, inertia_eff, dt, vector: bool):
+    """Energy (J, >= 0) the rolling-resistance torque ``m_r`` of :func:`rolling_torque` takes
+    from the relative rolling ``w_rel`` in one step.
+
+    A torque of constant magnitude ``M`` against the relative rotation of effective inertia
+    ``I*`` slows it from ``|w|`` to ``|w| - M dt / I*``; the kinetic energy of the relative
+    rotation drops by ``M dt (|w| - M dt / (2 I*))`` (which is ``I* w^2 / 2`` when the cap stops
+    the rolling within the step). ``vector``: 3-vectors (3D) on a trailing axis, else scalars
+    (the z components in 2D), as in :func:`rolling_torque`.
+    """
+    if vector:
+        mag_m, mag_w = _norm(m_r), _norm(w_rel)
+    else:
+        mag_m, mag_w = jnp.abs(m_r), jnp.abs(w_rel)
+    return mag_m * dt * jnp.maximum(mag_w - 0.5 * mag_m * dt / inertia_eff, 0.0)

@@ -196,9 +196,14 @@ def load() -> str:
     return TARGET
 
 
-def unsupported_reasons(dim, params, dtype, batch_axis) -> list[str]:
-    """Why ``pair_kernel="cpu"`` cannot serve this configuration (empty: it can)."""
+def unsupported_reasons(dim, params, dtype, batch_axis, friction_heat: bool = False) -> list[str]:
+    """Why ``pair_kernel="cpu"`` cannot serve this configuration (empty: it can);
+    ``friction_heat``: the contacts' losses are wanted as heat
+    (:mod:`drumheat.mechanics.dissipation`)."""
     reasons = []
+    if friction_heat:
+        reasons.append("it does not compute the contacts' losses for friction heat "
+                       "([heat.friction])")
     if dim not in (2, 3):
         reasons.append(f"it is written for 2D and 3D, not dim = {dim}")
     if jnp.dtype(dtype) not in (jnp.float32, jnp.float64):
@@ -211,9 +216,9 @@ def unsupported_reasons(dim, params, dtype, batch_axis) -> list[str]:
     return reasons
 
 
-def check_supported(dim, params, dtype, batch_axis) -> None:
+def check_supported(dim, params, dtype, batch_axis, friction_heat: bool = False) -> None:
     """Raise ValueError naming every reason why ``pair_kernel="cpu"`` cannot serve."""
-    reasons = unsupported_reasons(dim, params, dtype, batch_axis)
+    reasons = unsupported_reasons(dim, params, dtype, batch_axis, friction_heat)
     if reasons:
         raise ValueError("pair_kernel='cpu' cannot be used: " + "; ".join(reasons)
                          + ". Use pair_kernel='jax'.")

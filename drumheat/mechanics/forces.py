@@ -31,8 +31,10 @@ from drumheat.mechanics.contact_forces import (
     contact_law,
     cross_a_f,
     cross_w_a,
+    rolling_loss,
     rolling_torque,
 )
+from drumheat.mechanics.dissipation import ContactWork, Dissipation, FrictionHeat
 
 __all__ = ["Contacts", "ForceResult", "ContactForces", "JaxContactForces", "CpuContactForces",
            "make_contact_forces"]
@@ -51,6 +53,9 @@ class Contacts(NamedTuple):
     ``pair_conducts`` / ``wall_conducts``: the contacts that conduct heat, those that overlap or
     whose surface gap is within the conduction gap tolerance (``make_dem(conduction_gap=...)``;
     without one they equal the masks).
+    ``dissipation``: the heat of the step's friction and damping
+    (:class:`~drumheat.mechanics.dissipation.Dissipation`), with ``make_dem(friction_heat=...)``;
+    None otherwise.
     Always multiply by the masks: padded entries hold index N (pairs) and zeros.
     """
 
@@ -68,6 +73,7 @@ class Contacts(NamedTuple):
     wall_normal_force: jax.Array
     pair_conducts: jax.Array
     wall_conducts: jax.Array
+    dissipation: Optional[Dissipation] = None
 
 
 class ForceResult(NamedTuple):
@@ -76,7 +82,8 @@ class ForceResult(NamedTuple):
     force (N, dim) N and torque (N,) / (N, 3) N m: contacts and gravity; pair_spring
     (capacity, dim) and wall_spring (N, W, dim) m: the updated tangential springs; contacts:
     :class:`Contacts`; max_overlap: largest overlap / smaller radius of the step; heat (N,) W:
-    the per-step pair conduction (None without it).
+    the per-step pair conduction (None without it); work: with friction heat, what the
+    contacts leave for :func:`~drumheat.mechanics.dissipation.step_heat` (None without it).
     """
 
     force: jax.Array
@@ -86,6 +93,7 @@ class ForceResult(NamedTuple):
     contacts: Contacts
     max_overlap: jax.Array
     heat: Optional[jax.Array]
+    work: Optional[ContactWork] = None
 
 
 def _materialize(tree, pred):
@@ -113,7 +121,8 @@ class ContactForces:
 
     def __init__(self, particles, walls, params: ContactParams, *, dim: int, dt: float, dtype,
                  gravity, displacement, rotation: bool, conduction: PairConduction | None,
-                 conduction_gap: tuple[float, float], periodic_length=None):
+                 conduction_gap: tuple[float, float], periodic_length=None,
+                 friction_heat: FrictionHeat | None = None):
         self.n, self.dim, self.walls, self.n_w = particles.n, dim, tuple(walls), len(walls)
         self.params, self.dtype, self.rotation = params, dtype, rotation
         self.radius = particles.radius.astype(dtype)
@@ -131,6 +140,7 @@ class ContactForces:
         self.conduction = conduction
         self.gap_pp, self.gap_pw = conduction_gap
         self.periodic_length = periodic_length
+        self.friction_heat = friction_heat
 
     # -- the one signature ---------------------------------------------------------------------
     def __call__(self, pos, vel, w, t, nbrs, pair_spring, wall_spring,
@@ -229,7 +239,7 @@ class JaxContactForces(ContactForces):
                   temperature) -> ForceResult:
         n, gap_pp, radius = self.n, self.gap_pp, self.radius
         i, j = nbrs.idx[0], nbrs.idx[1]
-        force, torque, new_spring, ovl, dist, fn, active, max_ovl = self._pairs(
+        force, torque, new_spring, ovl, dist, fn, active, max_ovl, pair_work = self._pairs(
             pos, vel, w, nbrs, pair_spring, force, torque, i, j)
         pair_dist = dist  # every pair's, for the conduction gap tolerance (heat_flow)
         p_cond = active
@@ -238,8 +248,11 @@ class JaxContactForces(ContactForces):
             p_cond = (i < n) & (ovl >= -gap_pp * 2.0 * jnp.minimum(r_i, r_j))
         ovl = jnp.where(active, ovl, 0.0)
         dist = jnp.where(active, dist, 0.0)
-        force, torque, new_wall_spring, max_ovl, slots, wd = self._walls(
+        force, torque, new_wall_spring, max_ovl, slots, wd, wall_work = self._walls(
             pos, vel, w, t, wall_spring, force, torque, max_ovl)
+        work = None
+        if self.friction_heat is not None:
+            work = ContactWork(i, j, *pair_work, *wall_work)
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = slots
         contacts = Contacts(
             pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
@@ -251,7 +264,8 @@ class JaxContactForces(ContactForces):
         if c is not None and temperature is not None:
             heat = pair_heat_flow(temperature, contacts, self.radius_thermal, c.law,
                                   c.coefficient, c.gap_tolerance, pair_dist)
-        return ForceResult(force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat)
+        return ForceResult(force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat,
+                           work)
 
     def _pairs(self, pos, vel, w, nbrs, pair_spring, force, torque, i, j):
         n, dim, params, table = self.n, self.dim, self.params, self.table
@@ -277,11 +291,14 @@ class JaxContactForces(ContactForces):
         m_eff = mi * mj / (mi + mj)
         ti = ptype[ii]
         tj = ptype[jj]
+        heat = self.friction_heat is not None
         res = contact_law(nrm, ovl, v_rel, m_eff,
                           table(params.kn_pp, ti, tj), table(params.kt_pp, ti, tj),
                           table(params.zeta_n_pp, ti, tj), table(params.zeta_t_pp, ti, tj),
-                          table(params.mu_pp, ti, tj), pair_spring, self.dt_c, active)
+                          table(params.mu_pp, ti, tj), pair_spring, self.dt_c, active,
+                          dissipation=heat)
         f = res.force
+        m_r = None
         seg = jnp.concatenate([i, j])  # padding N is dropped by segment_sum
         if not self.rotation:
             force = force + jax.ops.segment_sum(jnp.concatenate([-f, f]), seg, n)
@@ -298,6 +315,8 @@ class JaxContactForces(ContactForces):
                 m_r = jnp.where(active[:, None] if m_r.ndim == 2 else active, m_r, 0.0)
                 tq_j = tq_j + m_r
                 tq_i = tq_i - m_r
+                roll_rate = rolling_loss(m_r, wj - wi, ii_ * ij_ / (ii_ + ij_), self.dt_c,
+                                         dim == 3) if heat else None
             # forces and torques in one scatter (the same additions in the same order as two
             # scatters); the barrier keeps XLA from fusing the contact law into the
             # concatenation, where it would be recomputed once per output column
@@ -310,12 +329,38 @@ class JaxContactForces(ContactForces):
             torque = torque + (tot[:, dim] if tq_i.ndim == 1 else tot[:, dim:])
         rmin_pair = jnp.minimum(ri, rj)
         max_ovl = jnp.max(jnp.where(active, ovl / rmin_pair, 0.0), initial=0.0)
-        return force, torque, res.spring, ovl, dist, res.normal_force, active, max_ovl
+        work = None
+        if heat:
+            work = self._pair_work(pos, vel, ii, jj, ri, rj, active, ovl, a_i, a_j, f, m_r,
+                                   pair_spring, res, table(params.kn_pp, ti, tj),
+                                   table(params.kt_pp, ti, tj),
+                                   roll_rate if self.rotation and self.use_rolling else None)
+        return force, torque, res.spring, ovl, dist, res.normal_force, active, max_ovl, work
+
+    def _pair_work(self, pos, vel, ii, jj, ri, rj, active, ovl, a_i, a_j, f, m_r, spring_old,
+                   res, kn, kt, roll_rate):
+        """The pairs' part of :class:`~drumheat.mechanics.dissipation.ContactWork`: force,
+        levers, rolling torque, the change of each pair's spring energy over the step (the
+        overlap before the step from the positions before the drift, ``x - dt v``) and the
+        loss rates."""
+        prev = pos - self.dt_c * vel
+        d0 = self.displacement(prev[jj], prev[ii])
+        ovl0 = ri + rj - jnp.sqrt(jnp.sum(d0 * d0, axis=-1))
+        u_old = (jnp.where(ovl0 > 0, 0.5 * kn * ovl0**2, 0.0)
+                 + 0.5 * kt * jnp.sum(spring_old**2, axis=-1))
+        u_new = (jnp.where(active, 0.5 * kn * ovl**2, 0.0)
+                 + 0.5 * kt * jnp.sum(res.spring**2, axis=-1))
+        zero = jnp.zeros_like(ovl)
+        rates = jnp.stack([res.damping_loss, res.slip_loss,
+                           zero if roll_rate is None else roll_rate])
+        return f, a_i, a_j, m_r, u_new - u_old, rates
 
     def _walls(self, pos, vel, w, t, wall_spring, force, torque, max_ovl):
         if self.n_w == 0:
+            z = jnp.zeros((self.n, 0, self.dim), self.dtype)
             return (force, torque, wall_spring, max_ovl, self.wall_slots(None, None, None),
-                    jnp.zeros((self.n, 0), self.dtype))
+                    jnp.zeros((self.n, 0), self.dtype),
+                    (z, z, z, None, None, z[..., 0], jnp.zeros((3, self.n, 0), self.dtype)))
         dim, dtype, params, wall_table = self.dim, self.dtype, self.params, self.wall_table
         radius, mass, inertia = self.radius, self.mass, self.inertia
         wd, wn, wv = self.wall_geometry(pos, t)
@@ -325,10 +370,13 @@ class JaxContactForces(ContactForces):
         a = -(r_ - 0.5 * wovl)[..., None] * wn
         v_relw = vel[:, None, :] + cross_w_a(w[:, None], a) - wv
         m_w = jnp.broadcast_to(mass[:, None], wd.shape)
+        heat = self.friction_heat is not None
         resw = contact_law(wn, wovl, v_relw, m_w,
                            wall_table(params.kn_pw), wall_table(params.kt_pw),
                            wall_table(params.zeta_n_pw), wall_table(params.zeta_t_pw),
-                           wall_table(params.mu_pw), wall_spring, self.dt_c, wact)
+                           wall_table(params.mu_pw), wall_spring, self.dt_c, wact,
+                           dissipation=heat)
+        m_r = w_wall_rel = roll_rate = None
         force = force + jnp.sum(resw.force, axis=1)
         if self.rotation:
             tq = cross_a_f(a, resw.force)
@@ -344,10 +392,35 @@ class JaxContactForces(ContactForces):
                                      wall_table(params.mu_roll_pw), inertia[:, None], self.dt_c)
                 m_r = jnp.where(wact[..., None] if m_r.ndim == 3 else wact, m_r, 0.0)
                 tq = tq + m_r
+                if heat:
+                    roll_rate = rolling_loss(m_r, w_rel, inertia[:, None], self.dt_c, dim == 3)
+                    w_wall_rel = jnp.broadcast_to(w_wall if dim == 2 else w_wall[None],
+                                                  m_r.shape)
             torque = torque + jnp.sum(tq, axis=1)
         max_ovl = jnp.maximum(max_ovl, jnp.max(jnp.where(wact, wovl / r_, 0.0)))
+        work = None
+        if heat:
+            work = self._wall_work(pos, vel, t, r_, wact, wovl, a, wv, resw, m_r, w_wall_rel,
+                                   roll_rate, wall_spring)
         return (force, torque, resw.spring, max_ovl,
-                self.wall_slots(wact, wovl, resw.normal_force), wd)
+                self.wall_slots(wact, wovl, resw.normal_force), wd, work)
+
+    def _wall_work(self, pos, vel, t, r_, wact, wovl, lever, wv, resw, m_r, w_wall, roll_rate,
+                   spring_old):
+        """The walls' part of :class:`~drumheat.mechanics.dissipation.ContactWork` (as
+        :meth:`_pair_work`; the overlap before the step from the walls at ``t - dt``)."""
+        kn = self.wall_table(self.params.kn_pw)
+        kt = self.wall_table(self.params.kt_pw)
+        wd0 = self.wall_geometry(pos - self.dt_c * vel, t - self.dt)[0]
+        ovl0 = r_ - wd0
+        u_old = (jnp.where(ovl0 > 0, 0.5 * kn * ovl0**2, 0.0)
+                 + 0.5 * kt * jnp.sum(spring_old**2, axis=-1))
+        u_new = (jnp.where(wact, 0.5 * kn * wovl**2, 0.0)
+                 + 0.5 * kt * jnp.sum(resw.spring**2, axis=-1))
+        zero = jnp.zeros_like(wovl)
+        rates = jnp.stack([resw.damping_loss, resw.slip_loss,
+                           zero if roll_rate is None else roll_rate])
+        return resw.force, lever, wv, m_r, w_wall, u_new - u_old, rates
 
 
 class CpuContactForces(ContactForces):
@@ -358,7 +431,8 @@ class CpuContactForces(ContactForces):
         super().__init__(*args, **kw)
         import drumheat.mechanics.cpu_kernel as cpu_kernel
 
-        cpu_kernel.check_supported(self.dim, self.params, self.dtype, batch_axis)
+        cpu_kernel.check_supported(self.dim, self.params, self.dtype, batch_axis,
+                                   self.friction_heat is not None)
         cpu_kernel.load()
         self._kernel = cpu_kernel
         # the C++ kernel's contact tables, wall spins, dt, period and rotation flag

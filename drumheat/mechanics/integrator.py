@@ -57,6 +57,7 @@ import numpy as np
 from drumheat.geometry.walls import expand_walls, wall_bounds
 from drumheat.mechanics.contact_forces import ContactParams, critical_time_step
 from drumheat.mechanics.conduction import PairConduction
+from drumheat.mechanics.dissipation import FrictionHeat, boundary_energy, step_heat
 from drumheat.mechanics.errors import (
     NeighborListError,
     NonFiniteError,
@@ -283,9 +284,9 @@ class DEM:
             n_rebuilds=jnp.asarray(0, jnp.int32), max_overlap=jnp.asarray(0.0, dt_),
             extra=self._check_temperature(extra),
         )
-        f, m, _, _, _, ovl, _ = self._forces(state.position, state.velocity,
-                                             state.angular_velocity, state.time, state.nbrs,
-                                             state.pair_spring, state.wall_spring)
+        res = self._forces(state.position, state.velocity, state.angular_velocity, state.time,
+                           state.nbrs, state.pair_spring, state.wall_spring)
+        f, m, ovl = res.force, res.torque, res.max_overlap
         if self._external is not None:
             f = f + jnp.asarray(self._external(state.position, state.velocity, state.time,
                                                state.extra), dt_)
@@ -430,7 +431,9 @@ class DEM:
     def energies(self, state: DEMState) -> dict:
         """Energy book (J): kinetic (translation, rotation), gravitational potential
         ``-sum m g.x``, elastic (normal ``k_n delta^2/2`` and tangential ``k_t |xi|^2/2``)
-        and their total."""
+        and their total; with friction heat also ``boundary``, the velocity-Verlet term of
+        :func:`~drumheat.mechanics.dissipation.boundary_energy` (``total + boundary`` falls
+        by exactly the heat the contacts dissipate)."""
         return {k: float(v) for k, v in self._energies(state).items()}
 
 
@@ -492,7 +495,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
         if pdata is not None:
             extra = dict(extra, pair_data=pdata)
-        f, tq, spring, wspring, contacts, ovl, heat = forces(
+        f, tq, spring, wspring, contacts, ovl, heat, work = forces(
             x, v, w, t, nbrs, spring, state.wall_spring,
             temperature=extra if conduction is not None else None)
         if external_force is not None:
@@ -500,6 +503,9 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         v = v + half * f * inv_m[:, None]
         if rotation:
             w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
+        if work is not None:  # friction heat: the contacts' losses at the full-step velocities
+            contacts = contacts._replace(
+                dissipation=step_heat(forces.friction_heat, work, v, w, dt))
         new = DEMState(position=x, velocity=v, angular_velocity=w, force=f, torque=tq, time=t,
                        step=state.step + 1, nbrs=nbrs, pair_spring=spring, wall_spring=wspring,
                        n_rebuilds=count, max_overlap=jnp.maximum(state.max_overlap, ovl),
@@ -522,8 +528,14 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         ep = -jnp.sum(m * (state.position @ forces.g_vec))
         c = forces.at(state).contacts
         el = forces.elastic_energy(c, state.pair_spring, state.wall_spring)
-        return dict(kinetic=ek, rotational=er, potential=ep, elastic=el,
-                    total=ek + er + ep + el)
+        out = dict(kinetic=ek, rotational=er, potential=ep, elastic=el,
+                   total=ek + er + ep + el)
+        if forces.friction_heat is not None:
+            tq = state.torque if rotation else jnp.zeros_like(state.torque)
+            out["boundary"] = boundary_energy(state.force, tq, state.velocity,
+                                              state.angular_velocity, mass, inertia,
+                                              forces.g_vec, dt)
+        return out
 
     def run_steps(state, n_steps):
         # a loop with a traced trip count: one compilation serves every chunk length
@@ -657,6 +669,7 @@ def make_dem(
     pair_kernel: str = "jax",
     conduction: Optional[PairConduction] = None,
     conduction_gap: tuple[float, float] = (0.0, 0.0),
+    friction_heat: Optional[FrictionHeat] = None,
 ) -> DEM:
     """Compose a DEM system (static choices are fixed here, before ``jit``).
 
@@ -711,6 +724,10 @@ def make_dem(
         smaller diameter, a particle-wall contact while the gap is at most the second times the
         particle diameter; (0, 0): while they overlap (Weigler digest [2.4]). The neighbour
         cutoff grows by the pair gap so that such pairs are listed.
+      friction_heat: :class:`~drumheat.mechanics.dissipation.FrictionHeat`: every step's
+        contact losses (damping, sliding, rolling) as heat, split between the partners of each
+        contact; the step's ``Contacts.dissipation`` carries it to ``extra_update``
+        (:mod:`drumheat.mechanics.dissipation`). JAX kernel only.
     """
     gap_pp, gap_pw = (float(g) for g in conduction_gap)
     if not (0.0 <= gap_pp < 0.5 and 0.0 <= gap_pw < 0.5):
@@ -720,6 +737,8 @@ def make_dem(
         raise ValueError(f"dim must be 2 or 3, got {dim}")
     if conduction is not None:
         conduction = PairConduction(*conduction).checked(particles.n)
+    if friction_heat is not None:
+        friction_heat = FrictionHeat(*friction_heat).checked(particles.n)
     walls = expand_walls(walls) if walls is not None else ()
     n_w = len(walls)
     if params.kn_pw.shape[1] not in (1, n_w) and n_w > 0:
@@ -753,7 +772,8 @@ def make_dem(
     forces = make_contact_forces(
         pair_kernel, particles, walls, params, batch_axis=batch_axis, dim=dim, dt=dt,
         dtype=dtype, gravity=gravity, displacement=neighbor.displacement, rotation=rotation,
-        conduction=conduction, conduction_gap=(gap_pp, gap_pw), periodic_length=periodic_length)
+        conduction=conduction, conduction_gap=(gap_pp, gap_pw), periodic_length=periodic_length,
+        friction_heat=friction_heat)
     step, run_steps, energies = _velocity_verlet(
         forces, neighbor, dt=dt, skin=skin, periodic_length=periodic_length, rotation=rotation,
         always_rebuild=always_rebuild, batch_axis=batch_axis, external_force=external_force,

@@ -7,7 +7,9 @@ DEM state's ``extra`` (:func:`initial_extra`): temperatures ``T``, heat accounts
 thermal model's array leaves ``model`` (so that parameters travel in the state and an ensemble
 vmaps over them), contact-time accumulators aligned with the neighbour pairs (``pair_data``,
 carried across neighbour-list rebuilds like the tangential springs) and per particle-wall slot,
-and the contact time summed over the current output interval (``count``).
+and the contact time summed over the current output interval (``count``). With friction heat
+(``make_dem(friction_heat=...)``, :mod:`drumheat.mechanics.dissipation`) each step's heat of
+the contacts is gathered in ``friction`` and added to the temperatures with the thermal step.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.mechanics.dissipation import SOURCES
 from drumheat.thermal.model import ThermalModel
 from drumheat.thermal.network import ContactNetwork
 
@@ -57,7 +60,7 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
 
 def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
                         dt: float, batch_axis: str | None = None, wall_ids=None,
-                        per_wall: bool = False):
+                        per_wall: bool = False, friction: bool = False):
     """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
 
     The ``extra`` state (:func:`initial_extra`) is a dict with ``T`` (N,) K, ``Q`` {account:
@@ -75,6 +78,13 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     ``per_wall``: every primitive is its own wall (``wall_ids = 0..n_walls-1``) and ``extra``
     also carries ``Q_walls`` (n_walls,) J, the heat each wall primitive gave to the particles
     (see :func:`initial_extra`).
+
+    ``friction``: the DEM turns its contacts' losses into heat (``Contacts.dissipation``);
+    ``extra["friction"]`` (:func:`initial_extra`) gathers each step's heat per particle
+    (``E``, J), the walls' share (``E_walls``) and the losses per source (``E_sources``,
+    :data:`drumheat.mechanics.dissipation.SOURCES`); the next thermal step adds ``E`` to the
+    temperatures and to the account ``Q["friction"]`` and the others to ``walls`` and
+    ``sources`` (J since t = 0), so that all of them are booked at the same instants.
     """
     h = substeps * dt
     heated = jnp.asarray(wall_heated, bool)
@@ -104,7 +114,17 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
             qw = (wall_effect.heat_flow_by_wall(extra["T"], m.particles, net, n_walls)
                   if wall_effect is not None else jnp.zeros(n_walls))
             out["Q_walls"] = extra["Q_walls"] + h * qw
-        T = extra["T"] + h * q / m.particles.capacity
+        heat = h * q
+        if friction:  # the heat gathered since the last thermal step
+            fr = extra["friction"]
+            heat = heat + fr["E"]
+            ext = dict(ext, friction=jnp.sum(fr["E"]) / h)
+            out["friction"] = {"E": jnp.zeros_like(fr["E"]),
+                               "E_walls": jnp.zeros_like(fr["E_walls"]),
+                               "E_sources": jnp.zeros_like(fr["E_sources"]),
+                               "walls": fr["walls"] + fr["E_walls"],
+                               "sources": fr["sources"] + fr["E_sources"]}
+        T = extra["T"] + heat / m.particles.capacity
         Q = {a: extra["Q"][a] + h * ext[a] if a in ext else extra["Q"][a] for a in extra["Q"]}
         pair = dict(extra["pair_data"], time=jnp.zeros_like(extra["pair_data"]["time"]))
         return dict(extra, T=T, Q=Q, k=jnp.zeros_like(extra["k"]), pair_data=pair,
@@ -121,6 +141,10 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
                  "wall": extra["count"]["wall"] + jnp.sum(wm * slot_heated)}
         extra = dict(extra, pair_data=pair, wall_time=extra["wall_time"] + wm,
                      rec_wall_time=extra["rec_wall_time"] + wm, k=extra["k"] + 1, count=count)
+        if friction:
+            d, fr = contacts.dissipation, extra["friction"]
+            extra["friction"] = dict(fr, E=fr["E"] + d.particle, E_walls=fr["E_walls"] + d.walls,
+                                     E_sources=fr["E_sources"] + d.by_source)
         ops = (state.nbrs.idx, state.position, state.time) if drum_wall else state.nbrs.idx
         if substeps == 1:
             return thermal_step(extra, ops)
@@ -151,13 +175,16 @@ def drum_wall_step(m: ThermalModel, extra: dict, net: ContactNetwork, position, 
 
 
 def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
-                  per_wall: bool = False, accounts=()) -> dict:
+                  per_wall: bool = False, accounts=(), friction: bool = False) -> dict:
     """The thermal part of the DEM state at t = 0.
 
     ``per_wall`` adds the per-primitive heat ``Q_walls`` (n_walls,) J; ``accounts`` adds
     further heat accounts (J, zero at t = 0) that an open boundary books into ``Q`` (e.g. the
-    enthalpy carried in by recycled particles).
+    enthalpy carried in by recycled particles); ``friction`` the account ``friction`` and the
+    friction-heat accumulators (:func:`make_thermal_update`).
     """
+    if friction:
+        accounts = tuple(accounts) + ("friction",)
     z = jnp.zeros(n * n_walls)
     Q = {a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)}
     out = {"T": jnp.asarray(T0, float), "Q": Q, "model": eqx.partition(model, eqx.is_array)[0],
@@ -168,6 +195,9 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
         out["Q_walls"] = jnp.zeros(n_walls)
     if model.drum_wall is not None:  # [heat.drum_wall]: the segments' temperatures and accounts
         out["wall"] = model.drum_wall.initial()
+    if friction:
+        z = {"E": jnp.zeros(n), "walls": jnp.zeros(()), "sources": jnp.zeros(len(SOURCES))}
+        out["friction"] = dict(z, E_walls=z["walls"], E_sources=z["sources"])
     return out
 
 

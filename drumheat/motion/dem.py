@@ -34,6 +34,7 @@ from drumheat import assemble
 from drumheat.devices import to_host
 from drumheat.mechanics import DEMError, make_dem
 from drumheat.mechanics.analysis import count_interfraction_contacts
+from drumheat.mechanics.dissipation import SOURCES
 from drumheat.mechanics.integrator import JIT_OPTIONS
 from drumheat.motion.base import register
 from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_count,
@@ -49,6 +50,17 @@ __all__ = ["DEMBed", "ContactRecorder"]
 
 #: name of the vmap axis of a DEM ensemble
 BATCH_AXIS = "variants"
+
+
+def friction_columns(rows) -> dict:
+    """Time-series columns of friction heat from the observed rows (J since t = 0):
+    ``Q_friction_walls`` (the walls' share) and ``dissipated:<source>`` (particles and walls,
+    :data:`drumheat.mechanics.dissipation.SOURCES`)."""
+    out = {"Q_friction_walls": np.array([float(r["friction"]["walls"]) for r in rows])}
+    sources = np.array([np.asarray(r["friction"]["sources"], float) for r in rows])
+    for k, name in enumerate(SOURCES):
+        out[f"dissipated:{name}"] = sources[:, k]
+    return out
 
 
 class ContactRecorder:
@@ -197,15 +209,17 @@ class DEMBed(DEMMotion):
         ``batch_axis``: the name of a vmap axis over states (ensembles), see
         :func:`drumheat.mechanics.make_dem` and :func:`~drumheat.motion.coupling.make_thermal_update`.
         """
+        friction = assemble.friction_heat(self.scene)
         update = make_thermal_update(model, self.n, len(self.walls), self.wall_heated,
                                      self.substeps, self.dt, batch_axis=batch_axis,
-                                     wall_ids=self.wall_ids)
+                                     wall_ids=self.wall_ids, friction=friction is not None)
         return make_dem(self.mech, self.walls, self.params, dim=self.dim, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.periodic,
                         skin=self.scene.dem.skin, dtype=self.dtype, extra_update=update,
                         chunk=self.steps_per_record or self.steps_per_output,
                         batch_axis=batch_axis, conduction_gap=self.setup.conduction_gap,
-                        pair_kernel=self.contact_backend(batch_axis is not None).backend)
+                        pair_kernel=self.contact_backend(batch_axis is not None).backend,
+                        friction_heat=friction)
 
     def packing_positions(self) -> np.ndarray:
         """Initial positions (pouring, deposition or a file), settled with the drum at rest
@@ -232,7 +246,8 @@ class DEMBed(DEMMotion):
         model, T0 = self.model(params)
         state = self.dem.init(self.packing_positions())
         cap = state.nbrs.idx.shape[1]
-        return state._replace(extra=initial_extra(model, T0, cap, self.n, len(self.walls)))
+        return state._replace(extra=initial_extra(model, T0, cap, self.n, len(self.walls),
+                                                  friction=self.scene.heat.friction is not None))
 
     def _steps(self, t0, t1, unit) -> int:
         return int(round((t1 - t0) / unit))
@@ -318,6 +333,8 @@ class DEMBed(DEMMotion):
                "mechanics": self.mechanics(state)}
         if "wall" in ex:  # [heat.drum_wall]
             row["wall"] = ex["wall"]
+        if "friction" in ex:
+            row["friction"] = {k: ex["friction"][k] for k in ("walls", "sources")}
         return row
 
     def finish(self, rows, log, state) -> Trajectory:
@@ -344,6 +361,8 @@ class DEMBed(DEMMotion):
             extra["interfraction_contacts"] = np.concatenate([
                 self._interfraction(positions[:n_c + 1]),
                 np.full(len(positions) - n_c - 1, np.nan)])
+        if "friction" in rows[0]:
+            extra.update(friction_columns(rows))
         rec = log["recorder"]
         particles = (state["model"] if isinstance(state, dict)
                      else eqx.combine(state.extra["model"], self._skeleton)).particles

@@ -196,13 +196,17 @@ def max_principle(scene: Scene, traj: Trajectory) -> dict:
     """Whether every temperature of the run stayed between the lowest and highest temperature
     it can reach (initial, gas, walls, radiating surfaces: the maximum principle of heat
     conduction); ``{"ok", "lowest", "highest", "bounds"}``. A violation means an unstable or
-    wrong step, which an energy balance cannot see."""
+    wrong step, which an energy balance cannot see. With a heat source in the bed
+    (``[heat.friction]``) nothing bounds the temperatures from above: the upper bound is then
+    None and only the lower one is checked."""
     lo, hi = temperature_bounds(scene)
     tol = 1e-9 * max(abs(lo), abs(hi))
+    if scene.heat.friction is not None:
+        hi = None
     T = np.asarray(traj.T)
     lowest, highest = float(np.min(T)), float(np.max(T))
-    return {"ok": bool(lowest >= lo - tol and highest <= hi + tol), "lowest": lowest,
-            "highest": highest, "bounds": [lo, hi]}
+    ok = lowest >= lo - tol and (hi is None or highest <= hi + tol)
+    return {"ok": bool(ok), "lowest": lowest, "highest": highest, "bounds": [lo, hi]}
 
 
 def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
@@ -239,6 +243,9 @@ def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
         "n_wall_contacts": float(np.mean(traj.n_wall_contacts)),
     }
     summary.update({k: float(v) for k, v in ts.iloc[-1].items() if k != "t"})
+    sources = [k for k in scene.heat.SOURCES if getattr(scene.heat, k) is not None]
+    if sources:  # heat generated in the bed (time-series columns Q_<source>)
+        summary["heat_sources"] = sources
     summary["max_principle"] = max_principle(scene, traj)
     if len(scene.groups) > 1:  # a bed of fractions: when did it equalise, on each criterion
         gas = scene.gas.temperature if "loss" in scene.heat.effects() else None

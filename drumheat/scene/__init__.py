@@ -17,10 +17,10 @@ from drumheat.scene.rules import (DRUM_MOTION_MODELS, MOTION_MODEL_NAMES,
 from drumheat.scene.spec import REQUIRED, SceneError, Table, parse_override, spec, to_dict
 from drumheat.scene.tables import (CONVECTION_CORRELATIONS, ChannelConfig, ContactConfig,
                                    ConvectionConfig, DEMConfig, DrumConfig, EntranceConfig,
-                                   GasConfig,
-                                   GranulatorConfig, GroupConfig, HeatConfig, HopperConfig,
-                                   InternalConfig, LossConfig, MotionConfig, PackingConfig,
-                                   RadiationConfig, RadiationSurface, ReplayConfig, RunConfig,
+                                   FrictionConfig, GasConfig, GranulatorConfig, GroupConfig,
+                                   HeatConfig, HopperConfig, InternalConfig, LossConfig,
+                                   MotionConfig, PackingConfig, RadiationConfig,
+                                   RadiationSurface, ReplayConfig, RunConfig,
                                    Scene, WallConfig, iter_keys)
 
 __all__ = [
@@ -29,7 +29,7 @@ __all__ = [
     "check_apparatus_tables", "MOTION_MODEL_NAMES", "DRUM_MOTION_MODELS",
     "CONVECTION_CORRELATIONS", "RunConfig", "DrumConfig", "GroupConfig", "GasConfig",
     "HeatConfig", "ContactConfig", "WallConfig", "LossConfig", "ConvectionConfig",
-    "RadiationConfig", "RadiationSurface", "InternalConfig", "MotionConfig", "PackingConfig",
-    "DEMConfig", "ReplayConfig", "GranulatorConfig", "ChannelConfig", "HopperConfig",
-    "EntranceConfig",
+    "RadiationConfig", "RadiationSurface", "InternalConfig", "FrictionConfig", "MotionConfig",
+    "PackingConfig", "DEMConfig", "ReplayConfig", "GranulatorConfig", "ChannelConfig",
+    "HopperConfig", "EntranceConfig",
 ]

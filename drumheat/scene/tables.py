@@ -418,6 +418,25 @@ class InternalConfig(Table):
 
 
 @dataclass(frozen=True)
+class FrictionConfig(Table):
+    """``[heat.friction]``: the mechanical energy the contacts dissipate (damping, sliding,
+    rolling resistance) becomes heat in the two partners of each contact
+    (drumheat.mechanics.dissipation, docs/models/friction-heat.md). Motion model 'dem'."""
+
+    TABLE = "heat.friction"
+
+    partition: str = spec("conductivity", choices=("conductivity", "half"),
+                          doc="How a contact's heat is split: 'conductivity' gives each partner "
+                              "k / (k_A + k_B) (Kratos ThermalDEM; the steady partition at an "
+                              "interface of one temperature), 'half' half and half. Equal for "
+                              "particles of one material.")
+    wall_material: str = spec("steel", choices=tuple(sorted(MATERIALS)),
+                              doc="Material of the walls, for the conductivity split; the "
+                                  "walls' share of the heat leaves the particles (time-series "
+                                  "column Q_friction_walls).")
+
+
+@dataclass(frozen=True)
 class HeatConfig(Table):
     """``[heat]``: the heat-transfer effects; an absent table is not simulated."""
 
@@ -433,10 +452,17 @@ class HeatConfig(Table):
     drum_wall: Optional[DrumWallConfig] = spec(None, doc="A drum wall with its own heat "
                                                          "capacity (segments turning with the "
                                                          "drum), heated from outside.")
+    friction: Optional[FrictionConfig] = spec(None, doc="Heat from friction and damping in the "
+                                                        "contacts (motion model 'dem').")
+
+    #: tables that are heat sources of the mechanics, not effects on the contact network
+    SOURCES = ("friction",)
 
     def effects(self) -> tuple[str, ...]:
-        """Names of the effects this scene switches on."""
-        return tuple(f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None)
+        """Names of the effects on the contact network this scene switches on (the heat
+        sources of the mechanics, ``[heat.friction]``, are not among them)."""
+        return tuple(f.name for f in dataclasses.fields(self)
+                     if getattr(self, f.name) is not None and f.name not in self.SOURCES)
 
 
 @dataclass(frozen=True)
