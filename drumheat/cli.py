@@ -2,7 +2,8 @@
 
 ``drumheat scenes`` lists the built-in scenes; ``drumheat run SCENE [--out DIR] [--set K=V]``
 runs one; ``drumheat validate [--quick] [--out DIR]`` runs the validation suite
-(:mod:`drumheat.analysis.validation`; exit code 1 when a comparison is outside its tolerance). Bad input gives a one-paragraph message naming the key, the value and what is
+(:mod:`drumheat.analysis.validation`; exit code 1 when a comparison is outside its
+tolerance). Bad input gives a one-paragraph message naming the key, the value and what is
 allowed, and exit code 2; nothing half-written is left behind.
 """
 

@@ -324,8 +324,8 @@ def _check_consistency(s) -> None:
                          f"'{s.motion.model}'", n)
     if s.heat.friction is not None and s.dem is not None and s.dem.replay_after is not None:
         raise SceneError("dem.replay_after", s.dem.replay_after, "a replay has no mechanics, so "
-                         "no friction heat: remove dem.replay_after (--set dem.replay_after=none) or "
-                         "[heat.friction]", n)
+                         "no friction heat: remove dem.replay_after (--set "
+                         "dem.replay_after=none) or [heat.friction]", n)
     if s.heat.internal is not None and s.motion.model in ("dem", "replay", "moving_bed"):
         raise SceneError("heat.internal", "a table", f"motion model '{s.motion.model}' "
                          "supports lumped particles only so far (radial shells need the static, "

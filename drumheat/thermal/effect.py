@@ -26,8 +26,8 @@ from jax import Array
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
 
-__all__ = ["AbstractEffect", "DrumGeometry", "EffectContext", "GasState", "PlugFlow", "TableValues", "EFFECTS",
-           "register"]
+__all__ = ["AbstractEffect", "DrumGeometry", "EffectContext", "GasState", "PlugFlow",
+           "TableValues", "EFFECTS", "register"]
 
 
 class TableValues:
