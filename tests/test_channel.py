@@ -76,7 +76,7 @@ def test_single_particle_reaches_terminal_slip():
     scene = channel_scene(d=d, rho=rho_p, count=1, height=0.2, gap=0.005, depth=0.012, u=u,
                           m_s=1e-3, duration=0.3, dt=2e-4, skin=0.005, stiffness=1e-4)
     model, traj, st, _ = run(scene)
-    assert bool(st.extra["active"][0])
+    assert bool(st.extra.active[0])
     rho, _, _, nu = (float(x) for x in _air_clipped(T_GAS))
     W_t = float(drag.terminal_velocity(d, rho_p, rho, nu * rho, "schiller_naumann", g=9.81))
     v = np.asarray(st.velocity[0])
@@ -94,7 +94,7 @@ def test_particle_temperature_follows_gnielinski_exponential():
                           m_s=10.0, duration=0.5, output_interval=0.1, dt=1e-4, stiffness=10.0,
                           convection={"correlation": "gnielinski-kraychev"}, coupling="none")
     model, traj, st, _ = run(scene)
-    assert abs(float(st.velocity[0, 1])) < 1e-9 and bool(st.extra["active"][0])
+    assert abs(float(st.velocity[0, 1])) < 1e-9 and bool(st.extra.active[0])
     alpha = float(nusselt_alpha("gnielinski-kraychev", d, W_t, rho, cp, lam, nu))
     tau = rho_p * c * d / (6 * alpha)
     t_heat = traj.t - model.dt  # released at the end of the first step
@@ -128,7 +128,7 @@ def test_energy_balance_closes_to_round_off(busy_channel):
     # gas enthalpy in - out + particle enthalpy in - out = change of stored heat
     np.testing.assert_allclose(traj.extra["H_gas"] + q_flow, stored, atol=1e-11 * scale)
     assert energy_balance(traj)[1] < 1e-11
-    assert int(np.sum(np.asarray(st.extra["active"]))) > 0
+    assert int(np.sum(np.asarray(st.extra.active))) > 0
 
 
 def test_exits_are_parked_and_reenter_at_inlet_temperature(busy_channel):
@@ -136,29 +136,29 @@ def test_exits_are_parked_and_reenter_at_inlet_temperature(busy_channel):
     _, _, boundary = model._hooks()
     ex = st.extra
     assert int(steady["released"]) > 0 and np.isfinite(traj.extra["T_particle_out"][-1])
-    parked = ~np.asarray(ex["active"])
-    np.testing.assert_array_equal(np.asarray(ex["T"])[parked], model.T_inlet[parked])
+    parked = ~np.asarray(ex.active)
+    np.testing.assert_array_equal(np.asarray(ex.T)[parked], model.T_inlet[parked])
     # one particle pushed past the outlet with a marked temperature
-    i = int(np.flatnonzero(np.asarray(ex["active"]))[0])
+    i = int(np.flatnonzero(np.asarray(ex.active))[0])
     T_mark = 350.0
     acc0 = model._zero_acc()
-    extra = dict(ex, T=ex["T"].at[i].set(T_mark), credit=jnp.zeros(()), acc=acc0,
-                 Q={"gas": jnp.zeros(()), "flow": jnp.zeros(())})
+    extra = ex.replace(T=ex.T.at[i].set(T_mark), credit=jnp.zeros(()), acc=acc0,
+                       Q={"gas": jnp.zeros(()), "flow": jnp.zeros(())})
     pos = st.position.at[i, 1].set(model.H + 1e-4)
     s1 = boundary(st._replace(position=pos, extra=extra))
     C = model.capacity[i]
-    assert not bool(s1.extra["active"][i])
-    assert float(s1.extra["T"][i]) == model.T_inlet[i]
+    assert not bool(s1.extra.active[i])
+    assert float(s1.extra.T[i]) == model.T_inlet[i]
     np.testing.assert_allclose(np.asarray(s1.position[i]), model.park[i])
-    assert float(s1.extra["Q"]["flow"]) == pytest.approx(C * (model.T_inlet[i] - T_mark))
-    assert float(s1.extra["acc"]["CT_exit"]) == pytest.approx(C * T_mark)
+    assert float(s1.extra.Q["flow"]) == pytest.approx(C * (model.T_inlet[i] - T_mark))
+    assert float(s1.extra.acc["CT_exit"]) == pytest.approx(C * T_mark)
     # with feeder credit, the longest-waiting particle enters at y = r at the inlet velocity
-    waiting = ~np.asarray(s1.extra["active"])
-    j = int(np.argmin(np.where(waiting, np.asarray(s1.extra["park_time"]), np.inf)))
-    s2 = boundary(s1._replace(extra=dict(s1.extra, credit=jnp.asarray(1.0))))
-    assert bool(s2.extra["active"][j])
+    waiting = ~np.asarray(s1.extra.active)
+    j = int(np.argmin(np.where(waiting, np.asarray(s1.extra.park_time), np.inf)))
+    s2 = boundary(s1._replace(extra=s1.extra.replace(credit=jnp.asarray(1.0))))
+    assert bool(s2.extra.active[j])
     assert float(s2.position[j, 1]) == pytest.approx(model.radius[j])
-    assert float(s2.extra["T"][j]) == model.T_inlet[j]
+    assert float(s2.extra.T[j]) == model.T_inlet[j]
     v = np.asarray(s2.velocity[j])
     assert v[1] == model.scene.channel.particle_inlet_velocity
     assert np.all(np.abs(v[[0, 2]]) <= model.scene.channel.inlet_velocity_spread)

@@ -90,7 +90,7 @@ def test_resting_dem_bed_matches_the_static_model(gap):
     assert len(wall) == int(np.sum(c.wall_conducts))
     if gap == 0:
         assert np.array_equal(c.pair_conducts, c.pair_mask)
-    T = state.extra["T"]
+    T = state.extra.T
     q_dem, _ = model.heat_flows(T, net_dem)
     q_static, _ = model.heat_flows(T, ContactNetwork.from_arrays(pairs, wall))
     np.testing.assert_allclose(q_dem, q_static, rtol=1e-12, atol=1e-15)
@@ -100,7 +100,7 @@ def test_resting_dem_bed_matches_the_static_model(gap):
     net_new = thermal_network(new.nbrs.idx, 30, c_new.pair_conducts * h, c_new.wall_conducts * h,
                               jnp.asarray(bed.wall_heated), 1, h)
     q_new, _ = model.heat_flows(T, net_new)
-    np.testing.assert_allclose(new.extra["T"], T + h * q_new / model.particles.capacity,
+    np.testing.assert_allclose(new.extra.T, T + h * q_new / model.particles.capacity,
                                rtol=0, atol=1e-12)
 
 

@@ -175,6 +175,26 @@ def test_checkpoint_of_another_scene_is_refused(tmp_path, monkeypatch):
                progress=False, resume=True)
 
 
+def test_checkpoint_of_another_state_layout_is_refused(tmp_path, monkeypatch):
+    """A checkpoint stores its state's layout (drumheat.runner.checkpoint.state_structure):
+    leaves of a state laid out otherwise (an earlier development version) are refused instead
+    of landing in the wrong places."""
+    out = tmp_path / "run"
+    with monkeypatch.context() as m:
+        kill_at(m, "dem", 2)
+        with pytest.raises(Killed):
+            dh.run(dem_scene(), out=out, progress=False)
+    with np.load(out / "checkpoint.npz") as f:
+        data = {k: f[k] for k in f.files}
+    meta = json.loads(str(data["meta"]))
+    assert "CoupledHeat" in meta["state"]["structure"]
+    meta["state"]["structure"] = meta["state"]["structure"].replace("CoupledHeat", "dict")
+    data["meta"] = np.array(json.dumps(meta))
+    np.savez(out / "checkpoint.npz", **data)
+    with pytest.raises(ValueError, match="laid out otherwise"):
+        dh.run(dem_scene(), out=out, progress=False, resume=True)
+
+
 def test_a_failing_run_keeps_the_earlier_result(tmp_path, monkeypatch):
     scene = load_scene("weigler-static", {"run.duration": 300.0})
     out = tmp_path / "run"

@@ -87,21 +87,20 @@ def test_recycling_hook_resets_particle():
 
     extra = initial_extra(model, T0, state.nbrs.idx.shape[1], bed.n, bed.n_walls,
                           per_wall=True, accounts=("inflow",))
-    extra["T"] = extra["T"].at[0].set(280.0)
-    extra["flow"] = bed.initial_flow()
+    extra = extra.replace(T=extra.T.at[0].set(280.0), flow=bed.initial_flow())
     state = state._replace(extra=extra, velocity=state.velocity.at[0].set([0.1, -0.5, 0.0]),
                            wall_spring=state.wall_spring.at[0].set(1e-4))
     new = jax.jit(bed.make_boundary())(state)
     p = np.asarray(new.position[0])
     assert np.min(np.linalg.norm(bed.sites - p, axis=1)) < 1e-12  # on an insertion site
-    assert float(new.extra["T"][0]) == s.hopper.inlet_temperature
+    assert float(new.extra.T[0]) == s.hopper.inlet_temperature
     np.testing.assert_array_equal(np.asarray(new.velocity[0]), 0.0)
     np.testing.assert_array_equal(np.asarray(new.wall_spring[0]), 0.0)
-    f = new.extra["flow"]
+    f = new.extra.flow
     assert int(f["n_out"]) == 1 and int(f["passes"][0]) == 1
     assert float(f["m_out"]) == pytest.approx(float(bed.mech.mass[0]))
     cap = float(model.particles.capacity[0])
-    assert float(new.extra["Q"]["inflow"]) == pytest.approx(cap * (s.hopper.inlet_temperature
+    assert float(new.extra.Q["inflow"]) == pytest.approx(cap * (s.hopper.inlet_temperature
                                                                     - 280.0))
     # the others are untouched
     np.testing.assert_array_equal(np.asarray(new.position[1:]), np.asarray(state.position[1:]))

@@ -43,6 +43,7 @@ resting beds) are in docs/models/dem-mechanics.md.
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import math
 import warnings
@@ -73,6 +74,7 @@ __all__ = [
     "Particles",
     "make_particles",
     "DEMState",
+    "PairCarried",
     "Contacts",
     "DEM",
     "make_dem",
@@ -171,15 +173,30 @@ def _jit(fun):
     return jax.jit(fun, compiler_options=JIT_OPTIONS)
 
 
-def pair_extra(extra):
-    """User per-pair data carried across neighbour rebuilds: ``extra["pair_data"]``.
+class PairCarried(eqx.Module):
+    """Base of user states (``DEMState.extra``) that hold arrays per neighbour pair.
 
-    If the ``extra`` state is a dict with a ``"pair_data"`` PyTree of arrays whose leading axis
-    runs over the neighbour pairs (aligned with ``nbrs.idx``), the integrator remaps it at every
-    rebuild and reallocation exactly like the tangential springs (pairs matched by identity,
-    new pairs start at zero). The coupled heat model keeps its contact-time accumulators there.
+    A state deriving from it names its per-pair arrays (:meth:`pair_arrays`: a PyTree whose
+    leaves have a leading axis over the neighbour pairs, aligned with ``nbrs.idx``); the
+    integrator remaps them at every neighbour rebuild and reallocation exactly like the
+    tangential springs (pairs matched by identity, new pairs start at zero) and puts them back
+    with :meth:`with_pair_arrays`. The coupled heat model
+    (:class:`drumheat.motion.coupling.CoupledHeat`) keeps its contact-time accumulators so.
+    Any other ``extra`` (an array, a dict, None) is carried through the step unchanged.
     """
-    return extra.get("pair_data") if isinstance(extra, dict) else None
+
+    @abc.abstractmethod
+    def pair_arrays(self):
+        """The per-pair arrays (a PyTree, leading axis over the neighbour pairs)."""
+
+    @abc.abstractmethod
+    def with_pair_arrays(self, arrays) -> "PairCarried":
+        """This state with its per-pair arrays replaced by ``arrays``."""
+
+
+def pair_extra(extra):
+    """The per-pair arrays of a :class:`PairCarried` ``extra`` state, else None."""
+    return extra.pair_arrays() if isinstance(extra, PairCarried) else None
 
 
 def _chunk_diagnostics(state, lo, hi, periodic_axis):
@@ -329,8 +346,8 @@ class DEM:
                 f"{target}, cell capacity {new.cell_list_capacity})", state)
         remap = lambda a: remap_pair_data(state.nbrs.idx, a, new.idx, n)  # noqa: E731
         pdata = pair_extra(state.extra)
-        extra = state.extra if pdata is None else dict(
-            state.extra, pair_data=jax.tree_util.tree_map(remap, pdata))
+        extra = state.extra if pdata is None else state.extra.with_pair_arrays(
+            jax.tree_util.tree_map(remap, pdata))
         return state._replace(nbrs=new, pair_spring=remap(state.pair_spring), extra=extra)
 
     def run(self, state: DEMState, n_steps: int, chunk: Optional[int] = None,
@@ -494,7 +511,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
                 need = jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
             nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
         if pdata is not None:
-            extra = dict(extra, pair_data=pdata)
+            extra = extra.with_pair_arrays(pdata)
         f, tq, spring, wspring, contacts, ovl, heat, work = forces(
             x, v, w, t, nbrs, spring, state.wall_spring,
             temperature=extra if conduction is not None else None)

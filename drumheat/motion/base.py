@@ -147,9 +147,15 @@ class AbstractMotion(abc.ABC):
 
     def restore_state(self, template, leaves: list, meta: dict, log):
         """The state of a checkpoint: the array ``leaves`` put onto ``template`` (a fresh
-        :meth:`initial_state`, whose non-array parts are the same); returns ``(state, log)``."""
+        :meth:`initial_state`, whose non-array parts are the same); returns ``(state, log)``.
+        ``meta["structure"]`` (written with the checkpoint) must equal the template's layout,
+        else the leaves would land in the wrong places (ValueError)."""
         dyn, static = eqx.partition(template, eqx.is_array)
         treedef = jax.tree_util.tree_structure(dyn)
+        if meta.get("structure") != str(treedef):  # (drumheat.runner.checkpoint.state_structure)
+            raise ValueError("the checkpoint's state is laid out otherwise than this code's "
+                             f"(motion model {self.name!r}; written by another development "
+                             "version of drumheat): start anew without --resume")
         if treedef.num_leaves != len(leaves):
             raise ValueError(f"the checkpoint holds {len(leaves)} state arrays, the motion model "
                              f"{self.name!r} builds {treedef.num_leaves}")

@@ -2,17 +2,22 @@
 ``[dem] thermal_substeps`` steps (weigler-thermal-dem.md eq. [2.7], section 6.1).
 
 :func:`make_thermal_update` is the ``extra_update`` hook of :func:`drumheat.mechanics.make_dem`
-that the DEM-based motion models (``dem``, ``moving_bed``) plug in; its state lives in the
-DEM state's ``extra`` (:func:`initial_extra`): temperatures ``T``, heat accounts ``Q``, the
-thermal model's array leaves ``model`` (so that parameters travel in the state and an ensemble
-vmaps over them), contact-time accumulators aligned with the neighbour pairs (``pair_data``,
-carried across neighbour-list rebuilds like the tangential springs) and per particle-wall slot,
-and the contact time summed over the current output interval (``count``). With friction heat
-(``make_dem(friction_heat=...)``, :mod:`drumheat.mechanics.dissipation`) each step's heat of
-the contacts is gathered in ``friction`` and added to the temperatures with the thermal step.
+that the DEM-based motion models (``dem``, ``moving_bed``) plug in; its state is the DEM
+state's ``extra``, a :class:`CoupledHeat` (:func:`initial_extra`): temperatures, heat accounts,
+the thermal model's array leaves (so that parameters travel in the state and an ensemble vmaps
+over them), contact-time accumulators aligned with the neighbour pairs (:class:`PairTimes`,
+carried across neighbour-list rebuilds like the tangential springs: ``CoupledHeat`` is a
+:class:`~drumheat.mechanics.integrator.PairCarried`) and per particle-wall slot, and the
+contact time summed over the current output interval (:class:`ContactCount`). With friction
+heat (``make_dem(friction_heat=...)``, :mod:`drumheat.mechanics.dissipation`) each step's heat
+of the contacts is gathered in a :class:`FrictionBook` and added to the temperatures with the
+thermal step.
 """
 
 from __future__ import annotations
+
+import dataclasses
+from typing import Any, NamedTuple, Optional
 
 import equinox as eqx
 import jax
@@ -20,11 +25,79 @@ import jax.numpy as jnp
 import numpy as np
 
 from drumheat.mechanics.dissipation import SOURCES
+from drumheat.mechanics.integrator import PairCarried
 from drumheat.thermal.model import ThermalModel
 from drumheat.thermal.network import ContactNetwork
 
-__all__ = ["thermal_network", "make_thermal_update", "initial_extra", "reset_record",
-           "reset_count", "drum_wall_step"]
+__all__ = ["CoupledHeat", "PairTimes", "ContactCount", "FrictionBook", "thermal_network",
+           "make_thermal_update", "initial_extra", "reset_record", "reset_count",
+           "drum_wall_step"]
+
+
+class PairTimes(NamedTuple):
+    """Contact time of each neighbour pair (M,) s, aligned with ``nbrs.idx``: ``time`` since
+    the last thermal step, ``rec_time`` since the start of the recording interval."""
+
+    time: jax.Array
+    rec_time: jax.Array
+
+
+class ContactCount(NamedTuple):
+    """Contact time of all particle pairs (``pair``) and of all particle-heated-wall contacts
+    (``wall``) since :func:`reset_count`, s."""
+
+    pair: jax.Array
+    wall: jax.Array
+
+
+class FrictionBook(NamedTuple):
+    """Friction heat (:mod:`drumheat.mechanics.dissipation`), J: gathered since the last
+    thermal step per particle (``E``), into the walls (``E_walls``) and per source
+    (``E_sources``, :data:`~drumheat.mechanics.dissipation.SOURCES`); booked since t = 0 into
+    the walls (``walls``) and per source (``sources``)."""
+
+    E: jax.Array
+    E_walls: jax.Array
+    E_sources: jax.Array
+    walls: jax.Array
+    sources: jax.Array
+
+
+class CoupledHeat(PairCarried):
+    """The heat state of a coupled DEM run (``DEMState.extra``), made by :func:`initial_extra`.
+
+    T: (N,) K. Q: {account: J} heat received since t = 0. model: the thermal model's array
+    leaves (``eqx.partition(m, eqx.is_array)[0]``). k: steps since the last thermal step.
+    wall_time, rec_wall_time: (N * n_walls,) s, contact time per particle-wall slot since the
+    last thermal step and since the start of the recording interval. pair: :class:`PairTimes`.
+    count: :class:`ContactCount`. Optional (None when the run has none): Q_walls (n_walls,) J,
+    the heat each wall primitive gave (``per_wall``); wall: the drum wall's segments
+    (``[heat.drum_wall]``, :meth:`drumheat.thermal.drum_wall.DrumWall.initial`); friction: a
+    :class:`FrictionBook`; flow: the motion model's own accumulators (``moving_bed``).
+    """
+
+    T: jax.Array
+    Q: dict
+    model: Any
+    k: jax.Array
+    wall_time: jax.Array
+    rec_wall_time: jax.Array
+    pair: PairTimes
+    count: ContactCount
+    Q_walls: Optional[jax.Array] = None
+    wall: Optional[dict] = None
+    friction: Optional[FrictionBook] = None
+    flow: Optional[dict] = None
+
+    def pair_arrays(self) -> PairTimes:
+        return self.pair
+
+    def with_pair_arrays(self, arrays) -> "CoupledHeat":
+        return self.replace(pair=arrays)
+
+    def replace(self, **fields) -> "CoupledHeat":
+        """This state with ``fields`` replaced."""
+        return dataclasses.replace(self, **fields)
 
 
 def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
@@ -63,28 +136,22 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
                         per_wall: bool = False, friction: bool = False):
     """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
 
-    The ``extra`` state (:func:`initial_extra`) is a dict with ``T`` (N,) K, ``Q`` {account:
-    J}, ``model`` (the array leaves of a thermal model with the structure of ``model``,
-    ``eqx.partition(m, eqx.is_array)[0]``: the thermal parameters are part of the state, so a
-    ``vmap`` over states runs variants with different parameters), ``k`` (steps since the last
-    thermal step), ``wall_time`` and ``rec_wall_time`` (N * n_walls,) s, ``pair_data`` =
-    {"time", "rec_time"} (M,) s aligned with the neighbour pairs (the integrator carries
-    ``extra["pair_data"]`` across rebuilds like the tangential springs) and ``count`` =
-    {"pair", "wall"}: the contact time of all particle pairs and of all particle-heated-wall
-    contacts since :func:`reset_count`, s. ``batch_axis`` names the vmap axis of an ensemble:
-    the thermal sub-step then stays a real ``lax.cond`` (all members count the same steps).
+    The ``extra`` state is a :class:`CoupledHeat` (:func:`initial_extra`); the thermal
+    parameters are part of it (``model``), so a ``vmap`` over states runs variants with
+    different parameters. Every step adds the step's contact times (the contacts that conduct,
+    ``Contacts.pair_conducts`` / ``wall_conducts``) to its accumulators; every ``substeps``
+    steps the temperatures take one explicit step on them. ``batch_axis`` names the vmap axis
+    of an ensemble: the thermal sub-step then stays a real ``lax.cond`` (all members count the
+    same steps).
 
     ``wall_ids`` (n_walls,) gives each wall primitive's wall id (see :func:`thermal_network`).
-    ``per_wall``: every primitive is its own wall (``wall_ids = 0..n_walls-1``) and ``extra``
-    also carries ``Q_walls`` (n_walls,) J, the heat each wall primitive gave to the particles
-    (see :func:`initial_extra`).
+    ``per_wall``: every primitive is its own wall (``wall_ids = 0..n_walls-1``) and the state
+    also carries ``Q_walls``.
 
-    ``friction``: the DEM turns its contacts' losses into heat (``Contacts.dissipation``);
-    ``extra["friction"]`` (:func:`initial_extra`) gathers each step's heat per particle
-    (``E``, J), the walls' share (``E_walls``) and the losses per source (``E_sources``,
-    :data:`drumheat.mechanics.dissipation.SOURCES`); the next thermal step adds ``E`` to the
-    temperatures and to the account ``Q["friction"]`` and the others to ``walls`` and
-    ``sources`` (J since t = 0), so that all of them are booked at the same instants.
+    ``friction``: the DEM turns its contacts' losses into heat (``Contacts.dissipation``); the
+    state's :class:`FrictionBook` gathers each step's heat, and the next thermal step adds it
+    to the temperatures and to the account ``Q["friction"]`` (and the walls' share and the
+    sources to their totals), so that all of them are booked at the same instants.
     """
     h = substeps * dt
     heated = jnp.asarray(wall_heated, bool)
@@ -95,60 +162,59 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     slot_heated = jnp.tile(heated, n).astype(jnp.float64)
 
     def model_of(extra):
-        return eqx.combine(extra["model"], skeleton)
+        return eqx.combine(extra.model, skeleton)
 
     drum_wall = model.drum_wall is not None  # [heat.drum_wall]: segments with their own state
 
     def thermal_step(extra, ops):
         idx = ops[0] if drum_wall else ops
-        net = thermal_network(idx, n, extra["pair_data"]["time"], extra["wall_time"], heated,
-                              n_walls, h, wall_ids)
+        net = thermal_network(idx, n, extra.pair.time, extra.wall_time, heated, n_walls, h,
+                              wall_ids)
         m = model_of(extra)
         if drum_wall:
             q, ext, out = drum_wall_step(m, extra, net, ops[1], ops[2], h, n_walls)
         else:
-            q, ext = m.heat_flows(extra["T"], net)
+            q, ext = m.heat_flows(extra.T, net)
             out = {}
         if per_wall:
             wall_effect = m.effect("wall")
-            qw = (wall_effect.heat_flow_by_wall(extra["T"], m.particles, net, n_walls)
+            qw = (wall_effect.heat_flow_by_wall(extra.T, m.particles, net, n_walls)
                   if wall_effect is not None else jnp.zeros(n_walls))
-            out["Q_walls"] = extra["Q_walls"] + h * qw
+            out["Q_walls"] = extra.Q_walls + h * qw
         heat = h * q
         if friction:  # the heat gathered since the last thermal step
-            fr = extra["friction"]
-            heat = heat + fr["E"]
-            ext = dict(ext, friction=jnp.sum(fr["E"]) / h)
-            out["friction"] = {"E": jnp.zeros_like(fr["E"]),
-                               "E_walls": jnp.zeros_like(fr["E_walls"]),
-                               "E_sources": jnp.zeros_like(fr["E_sources"]),
-                               "walls": fr["walls"] + fr["E_walls"],
-                               "sources": fr["sources"] + fr["E_sources"]}
-        T = extra["T"] + heat / m.particles.capacity
-        Q = {a: extra["Q"][a] + h * ext[a] if a in ext else extra["Q"][a] for a in extra["Q"]}
-        pair = dict(extra["pair_data"], time=jnp.zeros_like(extra["pair_data"]["time"]))
-        return dict(extra, T=T, Q=Q, k=jnp.zeros_like(extra["k"]), pair_data=pair,
-                    wall_time=jnp.zeros_like(extra["wall_time"]), **out)
+            fr = extra.friction
+            heat = heat + fr.E
+            ext = dict(ext, friction=jnp.sum(fr.E) / h)
+            out["friction"] = FrictionBook(
+                jnp.zeros_like(fr.E), jnp.zeros_like(fr.E_walls), jnp.zeros_like(fr.E_sources),
+                fr.walls + fr.E_walls, fr.sources + fr.E_sources)
+        T = extra.T + heat / m.particles.capacity
+        Q = {a: extra.Q[a] + h * ext[a] if a in ext else extra.Q[a] for a in extra.Q}
+        pair = extra.pair._replace(time=jnp.zeros_like(extra.pair.time))
+        return extra.replace(T=T, Q=Q, k=jnp.zeros_like(extra.k), pair=pair,
+                             wall_time=jnp.zeros_like(extra.wall_time), **out)
 
     def update(extra, state, contacts, dt_):
         # the contacts that conduct: overlapping or within the conduction gap tolerance
         # ([heat.contact] / [heat.wall] gap_tolerance, drumheat.mechanics.make_dem)
         pm = contacts.pair_conducts.astype(jnp.float64) * dt
         wm = contacts.wall_conducts.astype(jnp.float64) * dt
-        pair = {"time": extra["pair_data"]["time"] + pm,
-                "rec_time": extra["pair_data"]["rec_time"] + pm}
-        count = {"pair": extra["count"]["pair"] + jnp.sum(pm),
-                 "wall": extra["count"]["wall"] + jnp.sum(wm * slot_heated)}
-        extra = dict(extra, pair_data=pair, wall_time=extra["wall_time"] + wm,
-                     rec_wall_time=extra["rec_wall_time"] + wm, k=extra["k"] + 1, count=count)
+        pair = PairTimes(extra.pair.time + pm, extra.pair.rec_time + pm)
+        count = ContactCount(extra.count.pair + jnp.sum(pm),
+                             extra.count.wall + jnp.sum(wm * slot_heated))
+        fr = extra.friction
         if friction:
-            d, fr = contacts.dissipation, extra["friction"]
-            extra["friction"] = dict(fr, E=fr["E"] + d.particle, E_walls=fr["E_walls"] + d.walls,
-                                     E_sources=fr["E_sources"] + d.by_source)
+            d = contacts.dissipation
+            fr = fr._replace(E=fr.E + d.particle, E_walls=fr.E_walls + d.walls,
+                             E_sources=fr.E_sources + d.by_source)
+        extra = extra.replace(pair=pair, wall_time=extra.wall_time + wm,
+                              rec_wall_time=extra.rec_wall_time + wm, k=extra.k + 1,
+                              count=count, friction=fr)
         ops = (state.nbrs.idx, state.position, state.time) if drum_wall else state.nbrs.idx
         if substeps == 1:
             return thermal_step(extra, ops)
-        go = extra["k"] >= substeps
+        go = extra.k >= substeps
         if batch_axis is not None:
             go = jax.lax.psum(go.astype(jnp.int32), batch_axis) > 0
         return jax.lax.cond(go, thermal_step, lambda e, _: e, extra, ops)
@@ -168,14 +234,14 @@ def drum_wall_step(m: ThermalModel, extra: dict, net: ContactNetwork, position, 
     angle = jnp.repeat(jnp.arctan2(pos[:, 1], pos[:, 0]), n_walls)
     net = ContactNetwork(net.pair_i, net.pair_j, net.pair_weight, net.wall_particle,
                          net.wall_id, net.wall_weight, angle)
-    q, ext, rate, flows = m.heat_flows_wall(extra["T"], extra["wall"], net, time)
-    w = extra["wall"]
+    q, ext, rate, flows = m.heat_flows_wall(extra.T, extra.wall, net, time)
+    w = extra.wall
     wall = {"T": w["T"] + h * rate, "Q": {a: w["Q"][a] + h * flows[a] for a in w["Q"]}}
     return q, ext, {"wall": wall}
 
 
 def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
-                  per_wall: bool = False, accounts=(), friction: bool = False) -> dict:
+                  per_wall: bool = False, accounts=(), friction: bool = False) -> CoupledHeat:
     """The thermal part of the DEM state at t = 0.
 
     ``per_wall`` adds the per-primitive heat ``Q_walls`` (n_walls,) J; ``accounts`` adds
@@ -186,30 +252,31 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
     if friction:
         accounts = tuple(accounts) + ("friction",)
     z = jnp.zeros(n * n_walls)
-    Q = {a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)}
-    out = {"T": jnp.asarray(T0, float), "Q": Q, "model": eqx.partition(model, eqx.is_array)[0],
-           "k": jnp.asarray(0, jnp.int32), "wall_time": z, "rec_wall_time": z,
-           "pair_data": {"time": jnp.zeros(capacity), "rec_time": jnp.zeros(capacity)},
-           "count": {"pair": jnp.zeros(()), "wall": jnp.zeros(())}}
-    if per_wall:
-        out["Q_walls"] = jnp.zeros(n_walls)
-    if model.drum_wall is not None:  # [heat.drum_wall]: the segments' temperatures and accounts
-        out["wall"] = model.drum_wall.initial()
+    zero = jnp.zeros(())
+    book = None
     if friction:
-        z = {"E": jnp.zeros(n), "walls": jnp.zeros(()), "sources": jnp.zeros(len(SOURCES))}
-        out["friction"] = dict(z, E_walls=z["walls"], E_sources=z["sources"])
-    return out
+        book = FrictionBook(jnp.zeros(n), zero, jnp.zeros(len(SOURCES)), zero,
+                            jnp.zeros(len(SOURCES)))
+    return CoupledHeat(
+        T=jnp.asarray(T0, float),
+        Q={a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)},
+        model=eqx.partition(model, eqx.is_array)[0], k=jnp.asarray(0, jnp.int32), wall_time=z,
+        rec_wall_time=z, pair=PairTimes(jnp.zeros(capacity), jnp.zeros(capacity)),
+        count=ContactCount(zero, zero), Q_walls=jnp.zeros(n_walls) if per_wall else None,
+        # [heat.drum_wall]: the segments' temperatures and accounts
+        wall=model.drum_wall.initial() if model.drum_wall is not None else None,
+        friction=book)
 
 
 def reset_record(extra):
     """``extra`` with the contact-time accumulators of the recording set to zero."""
-    pair = dict(extra["pair_data"], rec_time=jnp.zeros_like(extra["pair_data"]["rec_time"]))
-    return dict(extra, pair_data=pair, rec_wall_time=jnp.zeros_like(extra["rec_wall_time"]))
+    return extra.replace(pair=extra.pair._replace(rec_time=jnp.zeros_like(extra.pair.rec_time)),
+                         rec_wall_time=jnp.zeros_like(extra.rec_wall_time))
 
 
 def reset_count(extra):
     """``extra`` with the contact time summed over the output interval set to zero."""
-    return dict(extra, count={k: jnp.zeros_like(v) for k, v in extra["count"].items()})
+    return extra.replace(count=ContactCount(*(jnp.zeros_like(v) for v in extra.count)))
 
 
 def thermal_step_limit(model: ThermalModel, n: int, dim: int, size_ratio: float,

@@ -81,14 +81,14 @@ class ContactRecorder:
 
     def add(self, idx, extra, position):
         """Record one interval: the neighbour pairs ``idx`` with their contact times
-        (``extra["pair_data"]["rec_time"]``), the wall contacts and the positions at its end."""
-        pt = np.asarray(extra["pair_data"]["rec_time"])
+        (``extra.pair.rec_time``), the wall contacts and the positions at its end."""
+        pt = np.asarray(extra.pair.rec_time)
         keep = (idx[0] < self.n) & (pt > 0)
         self.pair_i.append(idx[0][keep])
         self.pair_j.append(idx[1][keep])
         self.pair_dur.append(pt[keep])
         self.pair_ptr.append(self.pair_ptr[-1] + int(keep.sum()))
-        wt = np.asarray(extra["rec_wall_time"])
+        wt = np.asarray(extra.rec_wall_time)
         nz = np.nonzero(wt > 0)[0]
         self.wall_p.append(nz // self.n_walls)
         self.wall_k.append(nz % self.n_walls)
@@ -317,10 +317,10 @@ class DEMBed(DEMMotion):
         rec = log["recorder"]
         n_rec = len(rec.pair_ptr) - 1
         recording = Recording(rec.arrays(), first=n_rec - int(round(cycle / cfg.record_interval)))
-        model = eqx.combine(state.extra["model"], self._skeleton)
+        model = eqx.combine(state.extra.model, self._skeleton)
         g0 = recording.n_intervals  # the first step restarts the cycle
         log = dict(log, recording=recording, g0=g0)
-        return {"model": model, "T": state.extra["T"], "Q": state.extra["Q"],
+        return {"model": model, "T": state.extra.T, "Q": state.extra.Q,
                 "g": jnp.asarray(g0, jnp.int64), "net": recording.net}, log
 
     def observe(self, state) -> dict:
@@ -328,13 +328,13 @@ class DEMBed(DEMMotion):
             return {"T": state["T"], "Q": state["Q"], "g": state["g"]}
         span = self.steps_per_output * self.dt
         ex = state.extra
-        row = {"T": ex["T"], "Q": ex["Q"], "position": state.position,
-               "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span,
+        row = {"T": ex.T, "Q": ex.Q, "position": state.position,
+               "n_pairs": ex.count.pair / span, "n_wall": ex.count.wall / span,
                "mechanics": self.mechanics(state)}
-        if "wall" in ex:  # [heat.drum_wall]
-            row["wall"] = ex["wall"]
-        if "friction" in ex:
-            row["friction"] = {k: ex["friction"][k] for k in ("walls", "sources")}
+        if ex.wall is not None:  # [heat.drum_wall]
+            row["wall"] = ex.wall
+        if ex.friction is not None:
+            row["friction"] = {"walls": ex.friction.walls, "sources": ex.friction.sources}
         return row
 
     def finish(self, rows, log, state) -> Trajectory:
@@ -365,14 +365,14 @@ class DEMBed(DEMMotion):
             extra.update(friction_columns(rows))
         rec = log["recorder"]
         particles = (state["model"] if isinstance(state, dict)
-                     else eqx.combine(state.extra["model"], self._skeleton)).particles
+                     else eqx.combine(state.extra.model, self._skeleton)).particles
         wall = {}
         if "wall" in rows[0]:  # [heat.drum_wall] (no replay phase: scene/rules.py)
             wall = drum_wall_arrays(
                 {"T": np.stack([np.asarray(r["wall"]["T"]) for r in rows]),
                  "Q": {a: np.array([float(r["wall"]["Q"][a]) for r in rows])
                        for a in rows[0]["wall"]["Q"]}},
-                eqx.combine(state.extra["model"], self._skeleton).drum_wall)
+                eqx.combine(state.extra.model, self._skeleton).drum_wall)
         return Trajectory(
             t=self.t_out, T=T, Q=Q, position=positions, diameter=self.diameter,
             mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),

@@ -227,7 +227,7 @@ class MovingBed(DEMMotion):
             dist = jnp.where(out[None, :], jnp.inf, dist)
             clearance = jnp.min(dist, axis=1)  # (K,)
             free = clearance > clear
-            turn = ex["flow"]["turn"]
+            turn = ex.flow["turn"]
             key = jnp.where(free, (jnp.arange(K) - turn) % K, K + jnp.arange(K))
             order = jnp.argsort(key)
             rank = jnp.cumsum(out) - 1
@@ -239,11 +239,11 @@ class MovingBed(DEMMotion):
             vel = jnp.where((out & ~ok)[:, None], zero, vel)  # waiting below the slit
             w = jnp.where(ok[:, None], 0.0, state.angular_velocity)
             ws = jnp.where(ok[:, None, None], 0.0, state.wall_spring)
-            T_old = ex["T"]
-            cap = eqx.combine(ex["model"], skeleton).particles.capacity
+            T_old = ex.T
+            cap = eqx.combine(ex.model, skeleton).particles.capacity
             T = jnp.where(ok, T_in, T_old)
             okf = ok.astype(float)
-            flow = dict(ex["flow"])
+            flow = dict(ex.flow)
             flow["n_out"] = flow["n_out"] + jnp.sum(ok).astype(flow["n_out"].dtype)
             flow["m_out"] = flow["m_out"] + jnp.sum(okf * mass)
             flow["H_out"] = flow["H_out"] + jnp.sum(okf * cap * T_old)
@@ -251,8 +251,8 @@ class MovingBed(DEMMotion):
             flow["waiting"] = flow["waiting"] + jnp.sum(out & ~ok).astype(flow["waiting"].dtype)
             flow["turn"] = (turn + jnp.sum(ok).astype(turn.dtype)) % K
             flow["passes"] = flow["passes"] + ok.astype(flow["passes"].dtype)
-            Q = dict(ex["Q"], inflow=ex["Q"]["inflow"] + jnp.sum(okf * cap * (T_in - T_old)))
-            extra = dict(ex, T=T, Q=Q, flow=flow)
+            Q = dict(ex.Q, inflow=ex.Q["inflow"] + jnp.sum(okf * cap * (T_in - T_old)))
+            extra = ex.replace(T=T, Q=Q, flow=flow)
             return state._replace(position=new_pos, velocity=vel, angular_velocity=w,
                                   wall_spring=ws, extra=extra)
 
@@ -263,13 +263,13 @@ class MovingBed(DEMMotion):
             in_axis = (jnp.abs(pos[:, 0]) < ax) & (y > ylo) & (y < yhi)
             in_bundle = (y > ylo) & (y < yhi)
             ex = state.extra
-            flow = dict(ex["flow"])
+            flow = dict(ex.flow)
             flow["v_axis"] = flow["v_axis"] - jnp.sum(jnp.where(in_axis, vy, 0.0))
             flow["n_axis"] = flow["n_axis"] + jnp.sum(in_axis).astype(float)
             flow["v_bundle"] = flow["v_bundle"] - jnp.sum(jnp.where(in_bundle, vy, 0.0))
             flow["n_bundle"] = flow["n_bundle"] + jnp.sum(in_bundle).astype(float)
             flow["steps"] = flow["steps"] + 1.0
-            state = state._replace(extra=dict(ex, flow=flow))
+            state = state._replace(extra=ex.replace(flow=flow))
             out = y < y_exit
             return jax.lax.cond(jnp.any(out), recycle, lambda a: a[0], (state, out))
 
@@ -305,8 +305,7 @@ class MovingBed(DEMMotion):
         cap = state.nbrs.idx.shape[1]
         extra = initial_extra(model, T0, cap, self.n, self.n_walls, per_wall=True,
                               accounts=("inflow",))
-        extra["flow"] = self.initial_flow()
-        return state._replace(extra=extra)
+        return state._replace(extra=extra.replace(flow=self.initial_flow()))
 
     def advance(self, state, t0, t1):
         start = state._replace(extra=reset_count(reset_record(state.extra)),
@@ -316,11 +315,11 @@ class MovingBed(DEMMotion):
     def observe(self, state) -> dict:
         ex = state.extra
         span = self.steps_per_output * self.dt
-        return {"T": ex["T"], "Q": ex["Q"], "position": state.position,
-                "Q_tubes": ex["Q_walls"][self.geometry.tube_index],
-                "flow": {k: ex["flow"][k] for k in FLOW_RECORDS},
+        return {"T": ex.T, "Q": ex.Q, "position": state.position,
+                "Q_tubes": ex.Q_walls[self.geometry.tube_index],
+                "flow": {k: ex.flow[k] for k in FLOW_RECORDS},
                 "max_overlap": state.max_overlap,
-                "n_pairs": ex["count"]["pair"] / span, "n_wall": ex["count"]["wall"] / span,
+                "n_pairs": ex.count.pair / span, "n_wall": ex.count.wall / span,
                 "mechanics": self.mechanics(state)}
 
     def finish(self, rows, log, state) -> Trajectory:
@@ -328,13 +327,13 @@ class MovingBed(DEMMotion):
         records = {k: np.asarray(v, float) for k, v in r["flow"].items()}
         records["Q_tubes"] = r["Q_tubes"]
         records["max_overlap"] = r["max_overlap"]
-        records["passes"] = np.asarray(state.extra["flow"]["passes"])
+        records["passes"] = np.asarray(state.extra.flow["passes"])
         t = np.asarray(self.times)
         info = self.constants()
         ts = interval_columns(t, records, info)
         for k in range(len(self.geometry.tube_index)):
             ts[f"Q_tube:{k}"] = records["Q_tubes"][:, k]
-        particles = eqx.combine(state.extra["model"], self._skeleton).particles
+        particles = eqx.combine(state.extra.model, self._skeleton).particles
         n_pairs, n_wall = r["n_pairs"], r["n_wall"]
         return Trajectory(
             t=t, T=r["T"], Q=r["Q"], position=r["position"], diameter=self.diameter,

@@ -82,10 +82,12 @@ the simulated particle surface in the channel instead (the real hold-up, slip in
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -245,6 +247,31 @@ def ascent(d, rho_p, u_gas, rho_g, mu_g, height, v0=0.0, drag_law="schiller_naum
 # ---------------------------------------------------------------------------------------------
 # the motion model
 # ---------------------------------------------------------------------------------------------
+
+
+class ChannelState(eqx.Module):
+    """The channel's own state in ``DEMState.extra`` (module docstring).
+
+    T: (N,) particle temperatures, K. active: (N,) bool, in the channel (else queued at the
+    feeder). park_time: (N,) s, when each queued particle was parked (the feeder releases the
+    longest-waiting first). credit: kg of solids the feeder owes. T_gas: (cells + 1,) gas
+    temperatures at the cell faces, K. Q: {"gas", "flow"} heat received from the gas and
+    carried in by recycled particles, J. H_gas: enthalpy the gas took up, J. acc: the outlet
+    and feeder accumulators of the current output interval (:meth:`PneumaticChannel._zero_acc`).
+    """
+
+    T: jax.Array
+    active: jax.Array
+    park_time: jax.Array
+    credit: jax.Array
+    T_gas: jax.Array
+    Q: dict
+    H_gas: jax.Array
+    acc: dict
+
+    def replace(self, **fields) -> "ChannelState":
+        """This state with ``fields`` replaced."""
+        return dataclasses.replace(self, **fields)
 
 
 @register
@@ -485,7 +512,7 @@ class PneumaticChannel(DEMMotion):
 
         def gas_at(extra, y):
             k = cell_of(y)
-            Tn = extra["T_gas"]
+            Tn = extra.T_gas
             return k, 0.5 * (Tn[k] + Tn[k + 1])
 
         def external_force(position, velocity, t, extra):
@@ -498,13 +525,13 @@ class PneumaticChannel(DEMMotion):
             F = (drag_model.drag_force(u_rel, d, rho[:, None], (nu * rho)[:, None], law)
                  - (rho * vol)[:, None] * g_vec)
             F_park = -mass[:, None] * g_vec
-            return jnp.where(extra["active"][:, None], F, F_park)
+            return jnp.where(extra.active[:, None], F, F_park)
 
         def extra_update(extra, state, contacts, dt):
             pos = state.position.astype(f64)
             vel = state.velocity.astype(f64)
-            act = extra["active"]
-            T = extra["T"]
+            act = extra.active
+            T = extra.T
             k, Tg = gas_at(extra, pos[:, 1])
             gas = props(Tg)
             rho, cp, lam, nu = props(0.5 * (T + Tg)) if film else gas
@@ -531,7 +558,7 @@ class PneumaticChannel(DEMMotion):
                 T_nodes = jnp.full(n_cells + 1, T_g_in)
                 q = G * (T_g_in - T)
                 dH = dt * jnp.sum(q)
-            acc = extra["acc"]
+            acc = extra.acc
             # the per-cell profiles in one scatter (one column per quantity)
             cols = jnp.stack([mass * actf, C * T * actf, C * actf, area * actf,
                               mass * vel[:, 1] * actf, mass * slip * actf, q], axis=1)
@@ -544,23 +571,23 @@ class PneumaticChannel(DEMMotion):
                 Tg=acc["Tg"] + dt * T_nodes,
                 pairs=acc["pairs"] + jnp.sum(contacts.pair_mask, dtype=jnp.int32),
                 walls=acc["walls"] + jnp.sum(contacts.wall_mask, dtype=jnp.int32))
-            Q = dict(extra["Q"], gas=extra["Q"]["gas"] + dt * jnp.sum(q))
-            return dict(extra, T=T + dt * q / C, T_gas=T_nodes, Q=Q, H_gas=extra["H_gas"] + dH,
+            Q = dict(extra.Q, gas=extra.Q["gas"] + dt * jnp.sum(q))
+            return extra.replace(T=T + dt * q / C, T_gas=T_nodes, Q=Q, H_gas=extra.H_gas + dH,
                         acc=acc)
 
         def boundary_update(state):
             ex = state.extra
-            act = ex["active"]
+            act = ex.active
             y = state.position[:, 1].astype(f64)
             out = act & (y > H)
             outf = out.astype(f64)
-            T = ex["T"]
-            acc = ex["acc"]
+            T = ex.T
+            acc = ex.acc
             acc = dict(acc, n_exit=acc["n_exit"] + jnp.sum(outf),
                        m_exit=acc["m_exit"] + jnp.sum(outf * mass),
                        C_exit=acc["C_exit"] + jnp.sum(outf * C),
                        CT_exit=acc["CT_exit"] + jnp.sum(outf * C * T))
-            Q = dict(ex["Q"], flow=ex["Q"]["flow"] + jnp.sum(outf * C * (T_in_p - T)))
+            Q = dict(ex.Q, flow=ex.Q["flow"] + jnp.sum(outf * C * (T_in_p - T)))
             T = jnp.where(out, T_in_p, T)
             o3 = out[:, None]
             pos = jnp.where(o3, park.astype(state.position.dtype), state.position)
@@ -569,8 +596,8 @@ class PneumaticChannel(DEMMotion):
             f = jnp.where(o3, 0.0, state.force)
             tq = jnp.where(o3, 0.0, state.torque)
             act = act & ~out
-            park_time = jnp.where(out, state.time, ex["park_time"])
-            credit = ex["credit"] + m_dot * self.dt
+            park_time = jnp.where(out, state.time, ex.park_time)
+            credit = ex.credit + m_dot * self.dt
             waiting = ~act
             j = jnp.argmin(jnp.where(waiting, park_time, jnp.inf))
             has = jnp.any(waiting)
@@ -580,9 +607,9 @@ class PneumaticChannel(DEMMotion):
             args = (pos, vel, w, f, tq, act, credit, acc, state.step, j)
             pos, vel, w, f, tq, act, credit, acc, _, _ = jax.lax.cond(
                 can, release, lambda a: a, args)
-            moved = out | (act & ~ex["active"])
+            moved = out | (act & ~ex.active)
             ws = jnp.where(moved[:, None, None], 0.0, state.wall_spring)
-            extra = dict(ex, T=T, active=act, park_time=park_time, credit=credit, acc=acc, Q=Q)
+            extra = ex.replace(T=T, active=act, park_time=park_time, credit=credit, acc=acc, Q=Q)
             return state._replace(position=pos, velocity=vel, angular_velocity=w, force=f,
                                   torque=tq, wall_spring=ws, extra=extra)
 
@@ -617,16 +644,15 @@ class PneumaticChannel(DEMMotion):
             raise ValueError("motion model 'pneumatic' does not take parameter overrides; use "
                              "scene overrides")
         dem = self.dem
-        extra = {
-            "T": jnp.asarray(self.T_inlet, jnp.float64),
-            "active": jnp.zeros(self.n, bool),
-            "park_time": jnp.asarray(-1.0 + 1e-6 * np.arange(self.n), jnp.float64),
-            "credit": jnp.zeros((), jnp.float64),
-            "T_gas": jnp.full(self.cells + 1, self.T_gas_in, jnp.float64),
-            "Q": {"gas": jnp.zeros((), jnp.float64), "flow": jnp.zeros((), jnp.float64)},
-            "H_gas": jnp.zeros((), jnp.float64),
-            "acc": self._zero_acc(),
-        }
+        extra = ChannelState(
+            T=jnp.asarray(self.T_inlet, jnp.float64),
+            active=jnp.zeros(self.n, bool),
+            park_time=jnp.asarray(-1.0 + 1e-6 * np.arange(self.n), jnp.float64),
+            credit=jnp.zeros((), jnp.float64),
+            T_gas=jnp.full(self.cells + 1, self.T_gas_in, jnp.float64),
+            Q={"gas": jnp.zeros((), jnp.float64), "flow": jnp.zeros((), jnp.float64)},
+            H_gas=jnp.zeros((), jnp.float64),
+            acc=self._zero_acc())
         return dem.init(self.park, extra=extra)
 
     # -- evaluation -----------------------------------------------------------------------------
@@ -730,14 +756,14 @@ class PneumaticChannel(DEMMotion):
         return None, jnp.asarray(self.T_inlet, float)
 
     def advance(self, state, t0, t1):
-        start = state._replace(extra=dict(state.extra, acc=self._zero_acc()),
+        start = state._replace(extra=state.extra.replace(acc=self._zero_acc()),
                                max_overlap=jnp.zeros_like(state.max_overlap))
         return self.dem.run_steps(start, int(round((t1 - t0) / self.dt)))
 
     def observe(self, state) -> dict:
         ex = state.extra
-        return {"T": ex["T"], "Q": ex["Q"], "position": state.position, "acc": ex["acc"],
-                "H_gas": ex["H_gas"], "n_active": jnp.sum(ex["active"]),
+        return {"T": ex.T, "Q": ex.Q, "position": state.position, "acc": ex.acc,
+                "H_gas": ex.H_gas, "n_active": jnp.sum(ex.active),
                 "mechanics": self.mechanics(state)}
 
     def finish(self, rows, log, state) -> Trajectory:

@@ -30,6 +30,7 @@ from drumheat.devices import to_host
 from drumheat.motion.rows import RowSpool, flatten_dict, unflatten_dict
 
 __all__ = ["CHECKPOINT", "CheckpointError", "save_checkpoint", "load_checkpoint",
+           "state_structure",
            "flatten_dict", "unflatten_dict"]
 
 #: file name of the checkpoint in a result folder
@@ -44,6 +45,14 @@ def state_leaves(state) -> list:
     """The array leaves of a state (host arrays)."""
     dyn, _ = eqx.partition(state, eqx.is_array)
     return [np.asarray(a) for a in to_host(jax.tree_util.tree_leaves(dyn))]
+
+
+def state_structure(state) -> str:
+    """The structure of a state's array leaves (types, field names and dict keys, in leaf
+    order): two states whose structures are equal put their leaves in the same places
+    (:meth:`~drumheat.motion.base.AbstractMotion.restore_state` compares them)."""
+    dyn, _ = eqx.partition(state, eqx.is_array)
+    return str(jax.tree_util.tree_structure(dyn))
 
 
 def save_checkpoint(path: Path, *, scene_toml: str, motion_name: str, chunk: int, time: float,
@@ -78,7 +87,8 @@ def save_checkpoint(path: Path, *, scene_toml: str, motion_name: str, chunk: int
     for i, row in enumerate(rows):
         arrays.update({f"rows/{i}/{k}": v for k, v in flatten_dict(row).items()})
     meta = dict(drumheat=__version__, scene=scene_toml, motion=motion_name, chunk=int(chunk),
-                time=float(time), n_leaves=len(leaves), n_rows=len(rows), state=state_meta,
+                time=float(time), n_leaves=len(leaves), n_rows=len(rows),
+                state=dict(state_meta, structure=state_structure(state)),
                 **(extra_meta or {}))
     arrays["meta"] = np.array(json.dumps(meta))
     path = Path(path)
