@@ -231,6 +231,19 @@ class ContactForces:
         return el
 
 
+def _spring_energy_and_rates(kn, kt, overlap_old, spring_old, active, overlap, res, roll_rate):
+    """``(U_new - U_old, rates)`` of :class:`~drumheat.mechanics.dissipation.ContactWork`: the
+    change of each contact's spring energy ``k_n delta^2/2 + k_t |xi|^2/2`` over the step (a
+    normal spring only while it overlaps, as in :meth:`ContactForces.elastic_energy`) and the
+    (3, ...) loss rates (damping, sliding, rolling) of the contact law's result ``res``."""
+    u_old = (jnp.where(overlap_old > 0, 0.5 * kn * overlap_old**2, 0.0)
+             + 0.5 * kt * jnp.sum(spring_old**2, axis=-1))
+    u_new = (jnp.where(active, 0.5 * kn * overlap**2, 0.0)
+             + 0.5 * kt * jnp.sum(res.spring**2, axis=-1))
+    rolling = jnp.zeros_like(overlap) if roll_rate is None else roll_rate
+    return u_new - u_old, jnp.stack([res.damping_loss, res.slip_loss, rolling])
+
+
 class JaxContactForces(ContactForces):
     """The contact law in JAX operations: pairs through the neighbour list (a gather, the law,
     one scatter of forces and torques), walls as an (N, W) block."""
@@ -346,14 +359,8 @@ class JaxContactForces(ContactForces):
         prev = pos - self.dt_c * vel
         d0 = self.displacement(prev[jj], prev[ii])
         ovl0 = ri + rj - jnp.sqrt(jnp.sum(d0 * d0, axis=-1))
-        u_old = (jnp.where(ovl0 > 0, 0.5 * kn * ovl0**2, 0.0)
-                 + 0.5 * kt * jnp.sum(spring_old**2, axis=-1))
-        u_new = (jnp.where(active, 0.5 * kn * ovl**2, 0.0)
-                 + 0.5 * kt * jnp.sum(res.spring**2, axis=-1))
-        zero = jnp.zeros_like(ovl)
-        rates = jnp.stack([res.damping_loss, res.slip_loss,
-                           zero if roll_rate is None else roll_rate])
-        return f, a_i, a_j, m_r, u_new - u_old, rates
+        return (f, a_i, a_j, m_r, *_spring_energy_and_rates(kn, kt, ovl0, spring_old, active,
+                                                             ovl, res, roll_rate))
 
     def _walls(self, pos, vel, w, t, wall_spring, force, torque, max_ovl):
         if self.n_w == 0:
@@ -411,16 +418,9 @@ class JaxContactForces(ContactForces):
         :meth:`_pair_work`; the overlap before the step from the walls at ``t - dt``)."""
         kn = self.wall_table(self.params.kn_pw)
         kt = self.wall_table(self.params.kt_pw)
-        wd0 = self.wall_geometry(pos - self.dt_c * vel, t - self.dt)[0]
-        ovl0 = r_ - wd0
-        u_old = (jnp.where(ovl0 > 0, 0.5 * kn * ovl0**2, 0.0)
-                 + 0.5 * kt * jnp.sum(spring_old**2, axis=-1))
-        u_new = (jnp.where(wact, 0.5 * kn * wovl**2, 0.0)
-                 + 0.5 * kt * jnp.sum(resw.spring**2, axis=-1))
-        zero = jnp.zeros_like(wovl)
-        rates = jnp.stack([resw.damping_loss, resw.slip_loss,
-                           zero if roll_rate is None else roll_rate])
-        return resw.force, lever, wv, m_r, w_wall, u_new - u_old, rates
+        ovl0 = r_ - self.wall_geometry(pos - self.dt_c * vel, t - self.dt)[0]
+        return (resw.force, lever, wv, m_r, w_wall,
+                *_spring_energy_and_rates(kn, kt, ovl0, spring_old, wact, wovl, resw, roll_rate))
 
 
 class CpuContactForces(ContactForces):

@@ -240,8 +240,8 @@ def write_folder(out: str | Path, fill) -> Path:
     ``fill(tmp)`` writes the files into a fresh temporary folder beside ``out``; the folder
     then gets its manifest and replaces ``out`` the way a result folder does (an empty folder
     or an earlier folder of drumheat's own files only; anything else is refused before
-    ``fill`` runs, and nothing of the user's is deleted). Used for folders that are not run
-    results, e.g. ``drumheat validate --out``.
+    ``fill`` runs, and nothing of the user's is deleted). The result folders of runs
+    (:func:`write_results`) and ``drumheat validate --out`` are written so.
 
     Raises
     ------
@@ -289,12 +289,8 @@ def write_results(result, out_dir=None, figures: bool = True, figure_formats=("p
         If ``out_dir`` holds something drumheat did not write (see :func:`check_out_dir`).
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(result.scene.name)
-    check_out_dir(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    clean_stale_temporaries(out)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.drumheat-tmp-", dir=out.parent))
-    try:
-        tmp.chmod(0o777 & ~_umask())  # mkdtemp makes it 0700
+
+    def fill(tmp: Path) -> None:
         result.timeseries.to_csv(tmp / "timeseries.csv", index=False, float_format="%.10g")
         (tmp / "summary.json").write_text(json.dumps(result.summary, indent=2) + "\n")
         traj = result.trajectory
@@ -312,12 +308,8 @@ def write_results(result, out_dir=None, figures: bool = True, figure_formats=("p
             from drumheat.results import plot
 
             plot.save_figures(result, tmp, formats=figure_formats, dpi=dpi)
-        _write_manifest(tmp, [p.name for p in tmp.iterdir()])
-        place_folder(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return out
+
+    return write_folder(out, fill)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -332,10 +324,11 @@ class RunFolder:
     false``), ``timeseries.csv`` growing row by row (flushed; the columns every run has:
     ``t``, ``T_mean``, ``T_mean:<group>``, ``T_min``, ``T_max`` and the heat accounts), the
     latest ``checkpoint.npz``, the particle frames so far in ``.frames/`` (one ``.npy`` per
-    frame and quantity: a long run never holds all its frames in memory) and a lock (a second run into the same folder is refused). When
-    the run completes, the complete result replaces all of it (:func:`write_results`). A run
-    that stops early (Ctrl-C, an error) leaves what it has, marks the summary incomplete and
-    keeps the checkpoint, from which ``drumheat run ... --resume`` continues.
+    frame and quantity: a long run never holds all its frames in memory) and a lock (a second
+    run into the same folder is refused). When the run completes, the complete result replaces
+    all of it (:func:`write_results`). A run that stops early (Ctrl-C, an error) leaves what it
+    has, marks the summary incomplete and keeps the checkpoint, from which ``drumheat run ...
+    --resume`` continues.
 
     An earlier complete result at the output path is moved to ``<name>.previous`` beside it
     when a new run starts, and deleted when the new run completes: a run that fails never
