@@ -28,7 +28,7 @@ from drumheat.mechanics.deposition import Packing, deposit_2d
 from drumheat.mechanics.dissipation import FrictionHeat
 from drumheat.models.soft_sphere import default_time_step
 from drumheat.scene import Scene, SceneError
-from drumheat.scene.rules import dem_critical_time_step, dem_stiffness
+from drumheat.scene.rules import dem_critical_time_step, dem_stiffness, dem_time_step
 from drumheat.thermal.effect import DrumGeometry, EffectContext, GasState, PlugFlow, TableValues
 from drumheat.thermal.model import ThermalModel, make_thermal_model
 from drumheat.thermal.particles import ThermalParticles
@@ -56,13 +56,28 @@ def scene_values(scene: Scene, params: dict[str, Any] | None = None) -> ValueFn:
 
 
 def group_index(scene: Scene) -> np.ndarray:
-    """Group index of every particle, shape (N,), particles numbered group by group."""
-    return np.concatenate([np.full(g.count, k, dtype=np.int32) for k, g in enumerate(scene.groups)])
+    """Group index of every simulated particle, shape (N,), particles numbered group by group;
+    with ``dem.coarse_grain = s`` > 1 these are the parcels (:meth:`Scene.parcel_counts`)."""
+    return np.concatenate([np.full(c, k, dtype=np.int32)
+                           for k, c in enumerate(scene.parcel_counts())])
 
 
 def diameters(scene: Scene) -> np.ndarray:
-    """Nominal diameter of every particle, m, shape (N,)."""
-    return np.concatenate([np.full(g.count, g.diameter) for g in scene.groups])
+    """Nominal diameter of every simulated particle, m, shape (N,); with ``dem.coarse_grain =
+    s`` > 1 the parcels' ``s d`` (docs/models/coarse-graining.md)."""
+    cg = scene.coarse_grain
+    if cg == 1.0:
+        return np.concatenate([np.full(g.count, g.diameter) for g in scene.groups])
+    return np.concatenate([np.full(c, cg * g.diameter)
+                           for g, c in zip(scene.groups, scene.parcel_counts())])
+
+
+def mean_real_diameter(scene: Scene) -> float:
+    """Number-mean diameter of the real particles, m (Schluender's coefficients of a bed; the
+    same as the mean of :func:`diameters` without coarse-graining)."""
+    if scene.coarse_grain == 1.0:
+        return float(np.mean(diameters(scene)))
+    return float(sum(g.count * g.diameter for g in scene.groups) / scene.n_particles)
 
 
 def group_property(scene: Scene, value: ValueFn, k: int, prop: str):
@@ -81,10 +96,15 @@ def particle_property(scene: Scene, value: ValueFn, prop: str):
 
 
 def thermal_particles(scene: Scene, value: ValueFn) -> ThermalParticles:
-    """Particles as heat reservoirs (sphere masses, weigler-thermal-dem.md section 4)."""
+    """Particles as heat reservoirs (sphere masses, weigler-thermal-dem.md section 4); with
+    ``dem.coarse_grain = s`` > 1 the parcels, spheres of diameter ``s d`` and the particles'
+    density, i.e. mass and heat capacity ``s^3`` times a particle's (the ``s^3`` particles a
+    parcel stands for; docs/models/coarse-graining.md)."""
     group = group_index(scene)
     per_group = lambda f: jnp.stack([jnp.asarray(f(k), float) for k in range(len(scene.groups))])
     diameter = per_group(lambda k: value(f"groups.{k}.diameter"))[group]
+    if scene.coarse_grain != 1.0:
+        diameter = scene.coarse_grain * diameter
     density = per_group(lambda k: group_property(scene, value, k, "density"))[group]
     c = per_group(lambda k: group_property(scene, value, k, "heat_capacity"))[group]
     return ThermalParticles.spheres(diameter, density, c)
@@ -223,7 +243,7 @@ def thermal_model(scene: Scene, params: dict | None = None, *, wall_temperatures
         particles=particles,
         particle_property=lambda prop: particle_property(scene, value, prop),
         gas=gas_state(scene, value), contact_gas=contact_gas(scene, value),
-        mean_diameter=float(np.mean(diameters(scene))),
+        mean_diameter=mean_real_diameter(scene), coarse_grain=scene.coarse_grain,
         wall_temperatures=wall_temperatures, wall_surfaces=wall_surfaces,
         temperature_bounds=temperature_bounds(scene), duration=value("run.duration"),
         gas_velocity=gas_velocity, sink_temperature=sink_temperature, plug_flow=plug_flow,
@@ -299,7 +319,9 @@ def contact_parameters(scene: Scene) -> tuple[ContactParams, float]:
     """Contact parameters of the ``[dem]`` table and the normal stiffness k_n, N/m.
 
     Stiffness: :func:`drumheat.scene.rules.dem_stiffness` (default ``E A_p / d_p`` of the
-    smallest particle with the softest material, weigler eq. [2.3]).
+    smallest particle with the softest material, weigler eq. [2.3]; times ``dem.coarse_grain``
+    for parcels). Friction, rolling friction, restitution and damping ratio are the fine
+    bed's: dimensionless, kept by the coarse-graining (Bierwisch et al. 2009).
     """
     cfg = scene.dem
     k_n, _ = dem_stiffness(scene)
@@ -308,7 +330,8 @@ def contact_parameters(scene: Scene) -> tuple[ContactParams, float]:
         damping = dict(restitution=cfg.restitution)
     elif cfg.damping_ratio is not None:
         damping = dict(damping_ratio=cfg.damping_ratio)
-    params = contact_params(k_n, kn_wall=cfg.wall_stiffness, friction=cfg.friction,
+    k_wall = None if cfg.wall_stiffness is None else dem_stiffness(scene)[1]  # x coarse_grain
+    params = contact_params(k_n, kn_wall=k_wall, friction=cfg.friction,
                             wall_friction=cfg.wall_friction,
                             rolling_friction=cfg.rolling_friction, **damping)
     return params, k_n
@@ -350,7 +373,7 @@ def dem_setup(scene: Scene) -> DEMSetup:
     gravity = np.zeros(scene.dim)
     gravity[1] = -cfg.gravity
     particles = mechanical_particles(0.5 * d, density, group=group)
-    dt, dt_origin = cfg.dt, "dem.dt"
+    dt, dt_origin = dem_time_step(scene), "dem.dt"
     if dt is None:
         dt, by_dashpot = default_time_step(
             t_crit, cfg.safety_factor,

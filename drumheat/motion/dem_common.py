@@ -126,7 +126,7 @@ class DEMMotion(AbstractMotion):
         thermal_step_limit`): above it the temperatures would oscillate and leave the bounds
         of the maximum principle while the energy balance still closed."""
         d = [g.diameter for g in self.scene.groups]
-        limit = thermal_step_limit(model, self.scene.n_particles, self.scene.dim,
+        limit = thermal_step_limit(model, self.scene.n_parcels, self.scene.dim,
                                    max(d) / min(d), min(n_heated_walls, 3))
         substeps = self.scene.dem.thermal_substeps
         h = substeps * self.dt
@@ -223,7 +223,7 @@ def _wall_step_refusal(scene, model, h: float, limit: float, size_ratio: float,
 
     bare = ThermalModel(particles=model.particles, effects=model.effects,
                         internal=model.internal, names=model.names)
-    if h > thermal_step_limit(bare, scene.n_particles, scene.dim, size_ratio, walls_at_once):
+    if h > thermal_step_limit(bare, scene.n_parcels, scene.dim, size_ratio, walls_at_once):
         return  # the particles' own limit binds: the caller says so
     raise SceneError("heat.drum_wall.thickness", scene.heat.drum_wall.thickness,
                      f"the drum wall's segments make the explicit thermal limit {limit:.3g} s "

@@ -233,7 +233,7 @@ def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
         "scene": scene.name,
         "complete": True,
         "drumheat": __version__,
-        "n_particles": int(scene.n_particles),
+        "n_particles": int(scene.n_parcels),
         "duration_s": float(traj.t[-1] - traj.t[0]),
         "wall_time_s": round(wall_time, 3),
         "energy_balance_rel_error": rel,
@@ -242,6 +242,8 @@ def make_result(scene: Scene, traj: Trajectory, wall_time: float) -> Result:
         "n_contacts": float(np.mean(traj.n_contacts)),
         "n_wall_contacts": float(np.mean(traj.n_wall_contacts)),
     }
+    if scene.coarse_grain != 1.0:  # the per-particle arrays hold parcels
+        summary.update(coarse_grain=scene.coarse_grain, n_real_particles=scene.n_particles)
     summary.update({k: float(v) for k, v in ts.iloc[-1].items() if k != "t"})
     sources = [k for k in scene.heat.SOURCES if getattr(scene.heat, k) is not None]
     if sources:  # heat generated in the bed (time-series columns Q_<source>)

@@ -286,7 +286,7 @@ def run_ensemble(scene: Scene | str, overrides, *, devices=None, progress: bool 
     name = base.name
     for what, get in (("the motion model", lambda s: s.motion.model),
                       ("the dimension", lambda s: s.dim),
-                      ("the particle count", lambda s: s.n_particles),
+                      ("the particle count", lambda s: s.n_parcels),
                       ("the particle groups", lambda s: tuple(g.name for g in s.groups)),
                       ("the heat-transfer effects", lambda s: s.heat.effects())):
         vals = [get(s) for s in scenes]

@@ -97,7 +97,7 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
         if monitor is not None:
             rows = monitor.new_rows(rows)
     if mesh is not None:
-        state = shard_particles(state, mesh, motion.scene.n_particles)
+        state = shard_particles(state, mesh, motion.scene.n_parcels)
     is_output = output_flags(motion)
     times = motion.times
     if monitor is not None:
@@ -172,7 +172,7 @@ def estimate(motion: AbstractMotion, params=None, state=None) -> dict | None:
     if cost is None:
         return None
     cost = dict(cost)
-    cost["text"] = (f"{motion.scene.name}: {motion.scene.n_particles} particles, {cost['text']}; "
+    cost["text"] = (f"{motion.scene.name}: {motion.scene.n_parcels} particles, {cost['text']}; "
                     f"estimated wall time {_duration_text(cost['seconds'])} on this machine")
     return cost
 

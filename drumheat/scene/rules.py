@@ -196,26 +196,86 @@ def group_value(s, k: int, prop: str) -> float:
 def dem_stiffness(s) -> tuple[float, float]:
     """``(k_n, k_wall)`` of the ``[dem]`` table, N/m: ``dem.stiffness``, else ``E A_p / d_p``
     of the smallest particle with the softest material (weigler eq. [2.3]); the wall stiffness
-    defaults to k_n."""
+    defaults to k_n.
+
+    With ``dem.coarse_grain = s`` > 1 these are the parcels' stiffnesses: the given (fine)
+    values times s, and the default ``E A_p / d_p`` of the parcel diameter ``s d``, which is
+    the same factor s. A linear spring ``k ~ s`` keeps the overlap per diameter of the fine
+    bed both under a static load (contact force ~ pressure x (s d)^2, overlap F/k ~ s d) and
+    in an impact at the same velocity (overlap v sqrt(m/k) ~ sqrt(s^3/s) ~ s d): Bierwisch
+    et al. 2009, J. Mech. Phys. Solids 57, 10-31 (docs/models/coarse-graining.md).
+    """
     d = s.dem
+    cg = s.coarse_grain
     k_n = d.stiffness
     if k_n is None:
         E = min(group_value(s, k, "youngs_modulus") for k in range(len(s.groups)))
         k_n = float(normal_stiffness_from_youngs(E, min(g.diameter for g in s.groups)))
-    return k_n, (d.wall_stiffness if d.wall_stiffness is not None else k_n)
+    k_w = d.wall_stiffness if d.wall_stiffness is not None else k_n
+    if cg == 1.0:
+        return k_n, k_w
+    return cg * k_n, cg * k_w
 
 
 def dem_critical_time_step(s) -> float:
     """``t_crit = 2 sqrt(m_min / k_max)`` of the scene's DEM, s (weigler eq. [2.1]), with the
-    lightest particle and the largest stiffness (normal = tangential, particle or wall)."""
-    m_min = min(group_value(s, k, "density") * math.pi * g.diameter**3 / 6.0
+    lightest particle and the largest stiffness (normal = tangential, particle or wall); with
+    ``dem.coarse_grain = s`` the lightest parcel (diameter s d, mass s^3 m) and the parcel
+    stiffness (:func:`dem_stiffness`), so t_crit grows as s."""
+    cg = s.coarse_grain
+    m_min = min(group_value(s, k, "density") * math.pi * (cg * g.diameter)**3 / 6.0
                 for k, g in enumerate(s.groups))
     return critical_time_step(m_min, max(dem_stiffness(s)))
 
 
+def dem_time_step(s) -> float | None:
+    """The mechanical step ``dem.dt`` asked for, s, or None: with ``dem.coarse_grain = s`` the
+    given (fine-bed) step times s, since t_crit of the parcels is s times the fine one
+    (:func:`dem_critical_time_step`)."""
+    dt = s.dem.dt
+    return None if dt is None else dt * s.coarse_grain
+
+
+#: the heat effects that coarse-graining scales (docs/models/coarse-graining.md)
+COARSE_GRAIN_EFFECTS = ("contact", "wall", "loss")
+
+
+def _check_coarse_grain(s) -> None:
+    """``dem.coarse_grain`` > 1: only where its scalings are derived (3D drum, motion model
+    'dem', poured bed, contact/wall/loss heat), and at least one parcel per group."""
+    n, cg = s.name, s.coarse_grain
+    key = "dem.coarse_grain"
+    if s.dim != 3:
+        raise SceneError(key, cg, "coarse-graining needs dim = 3: a 2D scene is a monolayer "
+                         "one particle deep, and a parcel of diameter s d would make the slice "
+                         "s d deep (s monolayers, s^3 particles per parcel, not s^2), another "
+                         "apparatus (docs/models/coarse-graining.md)", n)
+    if s.motion.model != "dem" or s.drum is None:
+        raise SceneError(key, cg, f"coarse-graining is for the DEM drum (motion model 'dem'); "
+                         f"motion model {s.motion.model!r} is not supported", n)
+    if s.packing.method != "pour":
+        raise SceneError(key, cg, "coarse-graining needs packing.method = 'pour' (a packing "
+                         "file holds particles, not parcels)", n)
+    other = [e for e in s.heat.effects() if e not in COARSE_GRAIN_EFFECTS]
+    if s.heat.friction is not None:
+        other.append("friction")
+    if other:
+        tables = ", ".join(f"[heat.{e}]" for e in other)
+        raise SceneError(key, cg, "the scalings are derived for [heat.contact], [heat.wall] "
+                         f"and [heat.loss] only; leave out {tables} or use coarse_grain = 1", n)
+    for i, (g, c) in enumerate(zip(s.groups, s.parcel_counts())):
+        if c < 1:
+            raise SceneError(key, cg, f"group {i} ({g.count} particles) would have no parcel: "
+                             f"round(count / s^3) = 0; a smaller s or more particles", n)
+        if cg * g.diameter >= 0.5 * s.drum.diameter:
+            raise SceneError(key, cg, f"the parcels of group {i} (diameter s d = "
+                             f"{cg * g.diameter:g} m) would not fit in the drum radius "
+                             f"{0.5 * s.drum.diameter:g} m", n)
+
+
 def _check_periodic_slice(s, key: str, length: float, default_skin: float) -> None:
     """A periodic slice must be at least twice the neighbour cutoff ``d_max + skin`` long."""
-    d_max = max(g.diameter for g in s.groups)
+    d_max = s.coarse_grain * max(g.diameter for g in s.groups)  # parcels where coarse-grained
     skin = s.dem.skin if s.dem.skin is not None else default_skin * d_max
     if length < 2.0 * (d_max + skin) * (1 - 1e-12):
         raise SceneError(key, length, "the periodic slice must be at least twice the neighbour "
@@ -227,6 +287,8 @@ def _check_dem(s) -> None:
     """The mechanical time step of ``[dem]``: at most the critical step (weigler [2.1]); the
     periodic slices of the DEM models long enough for their neighbour lists."""
     n, d = s.name, s.dem
+    if s.coarse_grain != 1.0:
+        _check_coarse_grain(s)
     # default skins: half the largest radius (drumheat.mechanics.make_dem), the channel's
     # whole radius (drumheat.motion.pneumatic)
     if s.motion.model == "dem" and s.dim == 3 and s.drum is not None and s.drum.depth:
@@ -235,7 +297,7 @@ def _check_dem(s) -> None:
         _check_periodic_slice(s, "channel.depth", s.channel.depth, 0.5)
     if d.dt is not None:
         t_crit = dem_critical_time_step(s)
-        if d.dt > t_crit:
+        if dem_time_step(s) > t_crit:
             k_n, k_w = dem_stiffness(s)
             raise SceneError("dem.dt", d.dt, f"must not exceed the critical time step t_crit = "
                              f"2 sqrt(m_min/k) = {t_crit:.4g} s (weigler eq. [2.1], k = "

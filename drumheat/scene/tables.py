@@ -229,7 +229,9 @@ class LossConfig(Table):
 
     TABLE = "heat.loss"
 
-    alphaA: float = spec(unit="W/K", ge=0, doc="(alpha A)_WK per particle.")
+    alphaA: float = spec(unit="W/K", ge=0, doc="(alpha A)_WK per particle (per real particle: "
+                                               "a parcel of dem.coarse_grain = s loses s^3 "
+                                               "times this).")
 
 
 DRUM_WALL_OUTSIDE = ("flux", "gas", "temperature")
@@ -618,6 +620,16 @@ class DEMConfig(Table):
                                              "rest; best a whole number of revolutions.")
     settle_time: float = spec(0.0, unit="s", ge=0,
                               doc="Time the bed settles with the drum at rest before t = 0.")
+    coarse_grain: float = spec(
+        1.0, ge=1,
+        doc="Coarse-graining factor s: each DEM parcel of diameter s d stands for s^3 real "
+            "particles of the group (3D drums, motion model 'dem'; groups.*.count and "
+            "diameter stay those of the real bed, the parcel count is round(count / s^3)). "
+            "Mechanics scaled as Bierwisch et al. 2009 (same density, friction and "
+            "restitution; stiffness x s), heat so that the bed keeps the fine bed's "
+            "conductivity (alpha_pp / s on the parcel's area), wall contact coefficient per "
+            "wall area (alpha_wp unchanged) and loss per unit mass ((alpha A)_WK x s^3). "
+            "1 = no coarse-graining (docs/models/coarse-graining.md).")
     gravity: float = spec(9.81, unit="m/s2", ge=0,
                           doc="Gravity along -y. The thesis' 2D drum was tilted 45 degrees, "
                               "which would give 9.81 sin 45 = 6.94 in the plane; the source does "
@@ -841,8 +853,28 @@ class Scene(Table):
     # -- convenience ---------------------------------------------------------------------
     @property
     def n_particles(self) -> int:
-        """Number of particles of all groups."""
+        """Number of particles of all groups (the real particles; with coarse-graining the
+        DEM simulates :attr:`n_parcels` parcels that stand for them)."""
         return sum(g.count for g in self.groups)
+
+    @property
+    def coarse_grain(self) -> float:
+        """The coarse-graining factor s of ``[dem] coarse_grain`` (1.0 without ``[dem]``)."""
+        return 1.0 if self.dem is None else float(self.dem.coarse_grain)
+
+    def parcel_counts(self) -> tuple[int, ...]:
+        """Number of simulated particles (parcels) of each group: ``round(count / s^3)``
+        (docs/models/coarse-graining.md); the counts themselves when s = 1."""
+        s = self.coarse_grain
+        if s == 1.0:
+            return tuple(g.count for g in self.groups)
+        return tuple(int(round(g.count / s**3)) for g in self.groups)
+
+    @property
+    def n_parcels(self) -> int:
+        """Number of simulated particles (parcels) of all groups; :attr:`n_particles` when
+        ``dem.coarse_grain`` = 1."""
+        return sum(self.parcel_counts())
 
     def to_dict(self) -> dict:
         """The scene as a plain dict (what a TOML file holds); unset optional keys omitted."""

@@ -64,9 +64,29 @@ class ContactConduction(AbstractEffect):
 
     @classmethod
     def from_table(cls, table: TableValues, ctx: EffectContext) -> "ContactConduction":
-        """``[heat.contact]``: alpha as given (model "constant") or Schluender's alpha_pp."""
+        """``[heat.contact]``: alpha as given (model "constant") or Schluender's alpha_pp (of
+        the real particles' mean diameter); divided by s for parcels
+        (:func:`coarse_grained_alpha`)."""
         if table.table.model == "constant":
             alpha = table.alpha
         else:
             alpha = schluender_coefficients(ctx)[1]
-        return cls(alpha=jnp.asarray(alpha, float))
+        return cls(alpha=coarse_grained_alpha(jnp.asarray(alpha, float), ctx.coarse_grain))
+
+
+def coarse_grained_alpha(alpha, s: float):
+    """alpha_pp of parcels of scale factor ``s`` that keeps the fine bed's conductivity.
+
+    Derivation (docs/models/coarse-graining.md): in a bed of spheres of diameter d whose
+    contacts have conductance G, a temperature gradient dT/dx drops ``d dT/dx`` across each
+    contact and ``1/d^2`` contact columns cross a unit area, so the effective conductivity is
+    ``lambda_eff = c G / d`` with a factor c of the contact network alone (simple cubic lattice
+    c = 1; the mean-field network of a random packing, ``lambda_eff = (N_c / V) G d^2 / 3 =
+    phi z G / (pi d)`` with solid fraction phi and coordination number z, Argento & Bouvard
+    1996, Int. J. Heat Mass Transfer 39, 1343). A geometrically similar network of
+    parcels of diameter ``s d`` keeps c, so it keeps ``lambda_eff`` iff ``G_parcel = s G``.
+    With ``G = alpha_pp pi d^2 / 4`` (weigler eq. [2.7]) on the parcel's own projected area
+    (``s^2`` times larger) that is ``alpha_parcel = alpha_pp / s``. s = 1 returns ``alpha``
+    itself (today's code path).
+    """
+    return alpha if s == 1.0 else alpha / s

@@ -135,6 +135,11 @@ class EffectContext(NamedTuple):
         The scene's name, for warnings.
     drum : DrumGeometry or None
         The drum, where a drum wall with segments needs it (``[heat.drum_wall]``).
+    coarse_grain : float
+        Coarse-graining factor s (``[dem] coarse_grain``): the particles are parcels of
+        diameter ``s d`` standing for ``s^3`` real particles each; the effects that support it
+        scale their conductances so that the bed keeps the fine bed's properties
+        (docs/models/coarse-graining.md). ``mean_diameter`` is the real particles' then.
     """
 
     particles: ThermalParticles
@@ -152,6 +157,7 @@ class EffectContext(NamedTuple):
     density_given: bool = False
     name: str = ""
     drum: Optional[DrumGeometry] = None
+    coarse_grain: float = 1.0
 
 
 class AbstractEffect(eqx.Module):

@@ -43,6 +43,12 @@ class HeatLoss(AbstractEffect):
 
     @classmethod
     def from_table(cls, table: TableValues, ctx: EffectContext) -> "HeatLoss":
-        """``[heat.loss]`` with the gas temperature of ``[gas]``."""
-        return cls(alphaA=jnp.asarray(table.alphaA, float),
-                   gas_temperature=jnp.asarray(ctx.gas.temperature, float))
+        """``[heat.loss]`` with the gas temperature of ``[gas]``; per parcel ``s^3`` times the
+        particle's (alpha A)_WK with ``dem.coarse_grain = s``: the loss goes to the gas around
+        each real particle's surface, so a parcel loses what its ``s^3`` particles lose, and
+        the loss per unit mass (the parcel's mass is ``s^3`` m) stays that of the fine bed
+        (docs/models/coarse-graining.md)."""
+        alphaA = jnp.asarray(table.alphaA, float)
+        if ctx.coarse_grain != 1.0:
+            alphaA = ctx.coarse_grain**3 * alphaA
+        return cls(alphaA=alphaA, gas_temperature=jnp.asarray(ctx.gas.temperature, float))

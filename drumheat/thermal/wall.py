@@ -20,6 +20,12 @@ class WallConduction(AbstractEffect):
 
     weigler-thermal-dem.md eq. [2.7], with ``A_p = pi d^2 / 4`` of the particle.
 
+    Coarse-graining (``[dem] coarse_grain = s``) keeps alpha_wp: a parcel at the wall has the
+    projected area of the ``s^2`` real particles of the wall layer it covers, so the contact
+    conductance per unit wall area (the penetration model's contact coefficient alpha_WS,
+    weigler eq. [2.9] / Schluender 1984) is the fine bed's; docs/models/coarse-graining.md says
+    where this holds (wall contacts short against a first-layer particle's time constant).
+
     Attributes
     ----------
     alpha : scalar array
