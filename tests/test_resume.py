@@ -95,6 +95,22 @@ def test_coupled_dem_resumes_bit_for_bit(tmp_path, monkeypatch):
     kill_and_resume(dem_scene(), "dem", 2, tmp_path, monkeypatch)
 
 
+def test_coupled_dem_with_friction_heat_resumes_bit_for_bit(tmp_path, monkeypatch):
+    """The friction-heat accumulators (a FrictionBook in the state) travel in the checkpoint."""
+    res = kill_and_resume(dem_scene(**{"heat.friction.partition": "half"}), "dem", 2, tmp_path,
+                          monkeypatch)
+    assert res.timeseries["Q_friction"].iloc[-1] > 0
+
+
+def test_coupled_dem_with_a_drum_wall_resumes_bit_for_bit(tmp_path, monkeypatch):
+    """The drum wall's segment temperatures and accounts travel in the checkpoint."""
+    res = kill_and_resume(dem_scene(**{
+        "drum.wall_temperature": 320.0, "heat.wall.alpha": 114.0,
+        "heat.drum_wall.thickness": 0.002, "heat.drum_wall.outside": "temperature",
+        "heat.drum_wall.outer_temperature": 350.0}), "dem", 2, tmp_path, monkeypatch)
+    assert res.timeseries["Q_outside"].iloc[-1] > 0
+
+
 @pytest.mark.parametrize("chunk", [3, 6])  # while coupled / during the replay
 def test_dem_with_replay_after_resumes_bit_for_bit(chunk, tmp_path, monkeypatch):
     scene = dem_scene(**{"run.duration": 0.4, "run.output_interval": 0.1,
