@@ -17,7 +17,7 @@ loop. Two numbers per N:
 
 Nothing is N x N: every array is O(N) or O(pairs) = O(N) (the script prints the largest).
 
-Usage: python scripts/bench_memory.py [--n 2000 10000 50000] [--steps 200]
+Usage: python scripts/bench_memory.py [--n 2000 10000 50000] [--steps 200] [--kernel jax|cpu]
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 
-def measure(n: int, steps: int) -> dict:
+def measure(n: int, steps: int, kernel: str = "jax") -> dict:
     """Run in this process: build, run, and report memory numbers for N = n."""
     import resource
 
@@ -69,7 +69,8 @@ def measure(n: int, steps: int) -> dict:
             return T + dt * dq / mc
 
         dem = make_dem(part, [DrumShell(R, rpm=9.55)], params, dim=3, periodic_length=length,
-                       dt=1e-5, skin=0.004, dtype=jnp.float32, extra_update=conduction)
+                       dt=1e-5, skin=0.004, dtype=jnp.float32, extra_update=conduction,
+                       pair_kernel=kernel)
         T0 = jnp.asarray(293.0 + 50.0 * (pos[:, 0] > 0), jnp.float64)
         return dem, dem.init(pos, extra=T0)
 
@@ -92,10 +93,12 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, nargs="+", default=[2000, 10000, 50000])
     ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--kernel", choices=("jax", "cpu"), default="jax",
+                    help="contact kernel: the JAX one or the C++ loop (pair_kernel of make_dem)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
-        print(json.dumps(measure(args.child, args.steps)))
+        print(json.dumps(measure(args.child, args.steps, args.kernel)))
         return
     print("| N | pair capacity | state (MB) | state / particle (B) | peak RSS added (MB) | "
           "marginal RSS / particle (kB) | largest array |")
@@ -103,7 +106,8 @@ def main():
     prev = None
     for n in args.n:
         out = subprocess.run([sys.executable, __file__, "--child", str(n), "--steps",
-                              str(args.steps)], capture_output=True, text=True, check=True)
+                              str(args.steps), "--kernel", args.kernel], capture_output=True,
+                             text=True, check=True)
         d = json.loads(out.stdout.strip().splitlines()[-1])
         added = d["peak_mb"] - d["base_mb"]
         marginal = "" if prev is None else f"{(added - prev[1]) * 1024 / (n - prev[0]):.2f}"
