@@ -66,8 +66,6 @@ def diameters(scene: Scene) -> np.ndarray:
     """Nominal diameter of every simulated particle, m, shape (N,); with ``dem.coarse_grain =
     s`` > 1 the parcels' ``s d`` (docs/models/coarse-graining.md)."""
     cg = scene.coarse_grain
-    if cg == 1.0:
-        return np.concatenate([np.full(g.count, g.diameter) for g in scene.groups])
     return np.concatenate([np.full(c, cg * g.diameter)
                            for g, c in zip(scene.groups, scene.parcel_counts())])
 
@@ -324,13 +322,12 @@ def contact_parameters(scene: Scene) -> tuple[ContactParams, float]:
     bed's: dimensionless, kept by the coarse-graining (Bierwisch et al. 2009).
     """
     cfg = scene.dem
-    k_n, _ = dem_stiffness(scene)
+    k_n, k_wall = dem_stiffness(scene)  # the parcels' where coarse-grained
     damping = {}
     if cfg.restitution is not None:
         damping = dict(restitution=cfg.restitution)
     elif cfg.damping_ratio is not None:
         damping = dict(damping_ratio=cfg.damping_ratio)
-    k_wall = None if cfg.wall_stiffness is None else dem_stiffness(scene)[1]  # x coarse_grain
     params = contact_params(k_n, kn_wall=k_wall, friction=cfg.friction,
                             wall_friction=cfg.wall_friction,
                             rolling_friction=cfg.rolling_friction, **damping)

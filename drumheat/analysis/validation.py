@@ -32,11 +32,26 @@ import math
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
+from importlib.resources import files
 from pathlib import Path
 from typing import Callable, Optional
 
 import jax.numpy as jnp
 import numpy as np
+import pandas as pd
+
+from drumheat.analysis.calibrate import calibrate_lambda_bed
+from drumheat.mechanics.deposition import Packing
+from drumheat.models import penetration as pm
+from drumheat.results.files import write_folder
+from drumheat.runner.loop import run
+from drumheat.scene import load_scene, scene_from_dict
+from drumheat.thermal.contact import ContactConduction
+from drumheat.thermal.model import ThermalModel
+from drumheat.thermal.network import ContactNetwork
+from drumheat.thermal.particles import ThermalParticles
+from drumheat.thermal.solvers import initial_state, plan_solver
+from drumheat.thermal.wall import WallConduction
 
 __all__ = ["ValidationRow", "CaseResult", "CASES", "QUICK_CASES", "chain_steady_reference",
            "chain_eigen_reference", "lattice_conductivity", "lattice_bar", "steady_state",
@@ -113,11 +128,6 @@ def _rel(a: float, b: float) -> float:
 
 def _bed(d, rho, c, alpha_pp, alpha_wp, T_walls, pairs, wall_particles, wall_ids):
     """ThermalModel (contact + wall conduction of drumheat.thermal) and its ContactNetwork."""
-    from drumheat.thermal.contact import ContactConduction
-    from drumheat.thermal.model import ThermalModel
-    from drumheat.thermal.network import ContactNetwork
-    from drumheat.thermal.particles import ThermalParticles
-    from drumheat.thermal.wall import WallConduction
 
     n = int(np.max(pairs)) + 1 if len(pairs) else int(np.max(wall_particles)) + 1
     particles = ThermalParticles.spheres(np.full(n, d), rho, c)
@@ -147,7 +157,6 @@ def steady_state(model, net, T0, margin: float = 30.0):
     t_end : float
         Simulated time, s.
     """
-    from drumheat.thermal.solvers import initial_state, plan_solver
 
     C = np.asarray(model.particles.capacity)
     K = np.zeros((len(C), len(C)))
@@ -254,8 +263,6 @@ def _chain_steady(n=10, T_hot=343.0, T_cold=293.0):
 
 def _line_scene(n, folder, tol):
     """A line of n glass spheres across a 2D drum of diameter n d, ends touching the shell."""
-    from drumheat.mechanics.deposition import Packing
-    from drumheat.scene import scene_from_dict
 
     d = GLASS["d"]
     x = (np.arange(n) - 0.5 * (n - 1)) * d
@@ -272,8 +279,6 @@ def _line_scene(n, folder, tol):
 
 def _pair_scene(folder, tol):
     """Two touching glass spheres, one hot and one cold, in a drum that exchanges no heat."""
-    from drumheat.mechanics.deposition import Packing
-    from drumheat.scene import scene_from_dict
 
     d = GLASS["d"]
     path = Path(folder) / "pair.npz"
@@ -291,7 +296,6 @@ def _pair_scene(folder, tol):
 
 def _chain_transient(n=9, tol=1e-10):
     """The line across the drum and the two-sphere pair through :func:`drumheat.run`."""
-    from drumheat.runner.loop import run
 
     g = GLASS
     A = math.pi * g["d"] ** 2 / 4
@@ -527,8 +531,6 @@ READ_OFF = 1000.0
 
 def _semi_discrete(t_R: float, alpha_wp: float):
     """alpha_overall (A = d^2 N_w, eq. [1.10]) at READ_OFF of the scene weigler-glass-random."""
-    from drumheat.runner.loop import run
-    from drumheat.scene import load_scene
 
     scene = load_scene("weigler-glass-random").replace(**{
         "motion.t_R": float(t_R), "heat.wall.alpha": float(alpha_wp),
@@ -562,7 +564,6 @@ def case_drum_pm(quick: bool = True, progress=None) -> CaseResult:
     thesis case only; the full run adds t_R = 40 s at alpha_wp = 1000 and 10000, and 3, 10
     and 30 rpm at alpha_wp = 114, 1000 and 10000 W/(m2 K).
     """
-    from drumheat.models import penetration as pm
 
     b = PM_BED
     if quick:
@@ -613,10 +614,6 @@ def case_drum_pm(quick: bool = True, progress=None) -> CaseResult:
 
 def _table_4_1():
     """Weigler Table 4-1 (drumheat/data/weigler_table_4_1.csv = shared/data/)."""
-    from importlib.resources import files
-
-    import pandas as pd
-
     return pd.read_csv(files("drumheat") / "data" / "weigler_table_4_1.csv", comment="#")
 
 
@@ -626,8 +623,6 @@ def _heat_loss_rows():
     Tolerance: the scatter of the three repeated experiments about their mean (Table 4-1), the
     accuracy with which the measurement defines the value.
     """
-    from drumheat.runner.loop import run
-    from drumheat.scene import load_scene
 
     table = _table_4_1()
     rows = []
@@ -662,7 +657,6 @@ def case_thesis(quick: bool = True, progress=None) -> CaseResult:
       differ (the thesis' five give visibly different lambda_bed), so it is reported, not
       judged.
     """
-    from drumheat.models import penetration as pm
 
     t0 = time.perf_counter()
     t_R = float(pm.rest_time(10.0, 0.25))
@@ -671,8 +665,6 @@ def case_thesis(quick: bool = True, progress=None) -> CaseResult:
                           "weigler digest section 2, numeric note (eqs. [1.1]-[1.4])")]
     rows += _heat_loss_rows()
     if not quick:
-        from drumheat.analysis.calibrate import calibrate_lambda_bed
-
         t0 = time.perf_counter()
         cal = calibrate_lambda_bed("weigler-glass-wall", [57.0, 114.0], rho_bed=1230.0,
                                    convention="A7")
@@ -755,9 +747,6 @@ def write_validation(rows, figures: dict, out) -> Path:
     The folder is written like a result folder (:func:`drumheat.results.files.write_folder`):
     atomically, and never over a folder of files drumheat did not write.
     """
-    import pandas as pd
-
-    from drumheat.results.files import write_folder
 
     def fill(tmp: Path):
         table = pd.DataFrame([dict(asdict(r), status=r.status) for r in rows])

@@ -222,7 +222,8 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     return update
 
 
-def drum_wall_step(m: ThermalModel, extra: dict, net: ContactNetwork, position, time, h: float,
+def drum_wall_step(m: ThermalModel, extra: CoupledHeat, net: ContactNetwork, position, time,
+                   h: float,
                    n_walls: int):
     """One explicit thermal step of the particles' heat flows with a drum wall of segments
     (``[heat.drum_wall]``, :meth:`ThermalModel.heat_flows_wall`): each particle-wall slot's
@@ -232,8 +233,7 @@ def drum_wall_step(m: ThermalModel, extra: dict, net: ContactNetwork, position, 
     :meth:`ThermalModel.stability_limit` when the motion model is built)."""
     pos = jnp.asarray(position, jnp.float64)
     angle = jnp.repeat(jnp.arctan2(pos[:, 1], pos[:, 0]), n_walls)
-    net = ContactNetwork(net.pair_i, net.pair_j, net.pair_weight, net.wall_particle,
-                         net.wall_id, net.wall_weight, angle)
+    net = dataclasses.replace(net, wall_angle=angle)
     q, ext, rate, flows = m.heat_flows_wall(extra.T, extra.wall, net, time)
     w = extra.wall
     wall = {"T": w["T"] + h * rate, "Q": {a: w["Q"][a] + h * flows[a] for a in w["Q"]}}

@@ -41,7 +41,7 @@ from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_
                                       reset_record)
 from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.replay import Recording
-from drumheat.motion.rows import stack_arrays
+from drumheat.motion.rows import stack_arrays, stack_rows
 from drumheat.motion.static import drum_wall_arrays
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
@@ -56,10 +56,10 @@ def friction_columns(rows) -> dict:
     """Time-series columns of friction heat from the observed rows (J since t = 0):
     ``Q_friction_walls`` (the walls' share) and ``dissipated:<source>`` (particles and walls,
     :data:`drumheat.mechanics.dissipation.SOURCES`)."""
-    out = {"Q_friction_walls": np.array([float(r["friction"]["walls"]) for r in rows])}
-    sources = np.array([np.asarray(r["friction"]["sources"], float) for r in rows])
+    fr = stack_rows([r["friction"] for r in rows])
+    out = {"Q_friction_walls": np.asarray(fr["walls"], float)}
     for k, name in enumerate(SOURCES):
-        out[f"dissipated:{name}"] = sources[:, k]
+        out[f"dissipated:{name}"] = np.asarray(fr["sources"][:, k], float)
     return out
 
 
@@ -368,11 +368,8 @@ class DEMBed(DEMMotion):
                      else eqx.combine(state.extra.model, self._skeleton)).particles
         wall = {}
         if "wall" in rows[0]:  # [heat.drum_wall] (no replay phase: scene/rules.py)
-            wall = drum_wall_arrays(
-                {"T": np.stack([np.asarray(r["wall"]["T"]) for r in rows]),
-                 "Q": {a: np.array([float(r["wall"]["Q"][a]) for r in rows])
-                       for a in rows[0]["wall"]["Q"]}},
-                eqx.combine(state.extra.model, self._skeleton).drum_wall)
+            wall = drum_wall_arrays(stack_rows([r["wall"] for r in rows]),
+                                    eqx.combine(state.extra.model, self._skeleton).drum_wall)
         return Trajectory(
             t=self.t_out, T=T, Q=Q, position=positions, diameter=self.diameter,
             mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),

@@ -219,10 +219,7 @@ def _wall_step_refusal(scene, model, h: float, limit: float, size_ratio: float,
                        walls_at_once: int) -> None:
     """Raise a :class:`SceneError` naming ``[heat.drum_wall]`` when the drum wall's segments,
     not the particles, make the thermal step ``h`` (s) exceed the explicit ``limit`` (s)."""
-    from drumheat.thermal.model import ThermalModel
-
-    bare = ThermalModel(particles=model.particles, effects=model.effects,
-                        internal=model.internal, names=model.names)
+    bare = dataclasses.replace(model, drum_wall=None)  # the particles alone
     if h > thermal_step_limit(bare, scene.n_parcels, scene.dim, size_ratio, walls_at_once):
         return  # the particles' own limit binds: the caller says so
     raise SceneError("heat.drum_wall.thickness", scene.heat.drum_wall.thickness,

@@ -12,6 +12,7 @@ other packings) is one vmapped program and a calibration differentiates through 
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -185,10 +186,8 @@ class StaticBed(ThermalBed):
         self.pairs, self.wall_particles = pairs, wall
         self.net = ContactNetwork.from_arrays(pairs, wall)
         if scene.heat.drum_wall is not None:  # each wall contact's angle: its wall segment
-            n = self.net
-            self.net = ContactNetwork(n.pair_i, n.pair_j, n.pair_weight, n.wall_particle,
-                                      n.wall_id, n.wall_weight, jnp.asarray(
-                                          polar_angle(self.packing.position)[wall], float))
+            self.net = dataclasses.replace(self.net, wall_angle=jnp.asarray(
+                polar_angle(self.packing.position)[wall], float))
         model, T0 = self.model()
         self.solver = thermal_solver(scene, model, self.net, T0)
 

@@ -22,8 +22,7 @@ from drumheat.results.equalisation import equalisation_times
 from drumheat.results.files import write_results
 from drumheat.scene import Scene
 
-__all__ = ["Result", "make_result", "build_timeseries", "energy_balance", "drum_wall_balance",
-           "drum_wall_accounts"]
+__all__ = ["Result", "make_result", "build_timeseries", "energy_balance", "drum_wall_accounts"]
 
 
 @dataclass
@@ -86,21 +85,24 @@ def energy_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
     ``stored_heat`` (particles with radial shells) the stored-heat change is taken from it.
 
     With a drum wall of its own heat capacity (``traj.drum_wall``) the balance is that of bed
-    and wall together (:func:`drum_wall_balance`): the wall -> bed heat then cancels, and
-    ``residual = stored(bed) + stored(wall) - (Q_outside - Q_wall->gas + the bed's other
-    accounts)``; the scale adds the largest of the wall's accounts.
+    and wall together: the wall -> bed heat cancels, and ``residual = stored(bed) +
+    stored(wall) - (Q_outside - Q_wall->gas + the bed's other accounts)``; the scale adds the
+    largest of the wall's accounts (:func:`drum_wall_accounts`).
     """
-    if traj.drum_wall:
-        return drum_wall_balance(traj)
     if traj.stored_heat is not None:  # particles with shells: from the shell enthalpies
         stored = np.asarray(traj.stored_heat, float)
     else:
         stored = (traj.T - traj.T[0]) @ traj.capacity
     received = sum(traj.Q.values()) if traj.Q else np.zeros_like(stored)
-    residual = stored - received
     T0 = traj.T[0]
     scale = float(np.sum(traj.capacity * np.abs(T0 - np.average(T0, weights=traj.capacity))))
     scale += sum(float(np.max(np.abs(q))) for q in traj.Q.values())
+    if traj.drum_wall:  # bed and wall together
+        w = drum_wall_accounts(traj)
+        stored = stored + w["stored"]
+        received = received - w["bed"] + w["outside"] - w["gas"]
+        scale += sum(float(np.max(np.abs(w[a]))) for a in ("outside", "gas", "stored"))
+    residual = stored - received
     rel = float(np.max(np.abs(residual)) / scale) if scale > 0 else float(np.max(np.abs(residual)))
     return residual, rel
 
@@ -113,24 +115,6 @@ def drum_wall_accounts(traj: Trajectory) -> dict[str, np.ndarray]:
     stored = (w["T"] - w["T"][0]) @ w["capacity"]
     return {"outside": w["Q_outside"], "bed": traj.Q.get("wall", np.zeros_like(stored)),
             "gas": w["Q_gas"], "stored": stored}
-
-
-def drum_wall_balance(traj: Trajectory) -> tuple[np.ndarray, float]:
-    """Energy balance of bed and drum wall together (see :func:`energy_balance`):
-    ``(residual_J (n_out,), rel_error)`` with ``residual = stored(bed) + stored(wall) -
-    (Q_outside - Q_wall->gas + sum of the bed's accounts other than wall)``. The wall's own
-    balance ``stored(wall) = Q_outside - Q_wall->bed - Q_wall->gas`` and the bed's
-    ``stored(bed) = sum of the bed's accounts`` add up to it."""
-    w = drum_wall_accounts(traj)
-    stored = (traj.T - traj.T[0]) @ traj.capacity + w["stored"]
-    bed_other = sum((q for a, q in traj.Q.items() if a != "wall"), np.zeros_like(stored))
-    residual = stored - (w["outside"] - w["gas"] + bed_other)
-    T0 = traj.T[0]
-    scale = float(np.sum(traj.capacity * np.abs(T0 - np.average(T0, weights=traj.capacity))))
-    scale += sum(float(np.max(np.abs(q))) for q in traj.Q.values())
-    scale += sum(float(np.max(np.abs(w[a]))) for a in ("outside", "gas", "stored"))
-    rel = float(np.max(np.abs(residual)) / scale) if scale > 0 else float(np.max(np.abs(residual)))
-    return residual, rel
 
 
 def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
