@@ -82,13 +82,21 @@ def tiled(base: Path, n: int, out: Path) -> Path:
     return out
 
 
+def mean_temperature(state) -> float:
+    """Mean particle temperature (K) of a coupled DEM state (``CoupledHeat.T``), NaN without
+    heat."""
+    import jax.numpy as jnp
+
+    T = getattr(state.extra, "T", None)
+    return float(jnp.mean(T)) if T is not None else float("nan")
+
+
 def measure(n: int, precision: str, base: Path, seconds: float, warm: int) -> dict:
     """In this process: build the scene at N, warm up, time; one dict of numbers."""
     import resource
     import tempfile
 
     import jax
-    import jax.numpy as jnp
     import numpy as np
 
     from drumheat.motion import make_motion
@@ -111,15 +119,13 @@ def measure(n: int, precision: str, base: Path, seconds: float, warm: int) -> di
     per_step = (time.perf_counter() - t0) / probe
     steps = int(max(200, min(50000, seconds / per_step)))
     steps = -(-steps // probe) * probe  # whole chunks: the compiled chunk length is reused
-    T_before = float(jnp.mean(state.extra["T"])) if isinstance(state.extra, dict) and \
-        "T" in state.extra else float("nan")
+    T_before = mean_temperature(state)
     r0 = int(state.n_rebuilds)
     t0 = time.perf_counter()
     out = dem.run(state, steps, chunk=probe)
     jax.block_until_ready(out.position)
     wall = time.perf_counter() - t0
-    T_after = float(jnp.mean(out.extra["T"])) if isinstance(out.extra, dict) and \
-        "T" in out.extra else float("nan")
+    T_after = mean_temperature(out)
     dev = jax.devices()[0]
     stats = dev.memory_stats() or {}
     peak = stats.get("peak_bytes_in_use")

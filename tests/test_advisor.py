@@ -89,3 +89,37 @@ def test_internal_conduction_is_recommended_only_where_the_motion_model_has_it(m
         assert "add [heat.internal]" in adv.biot_verdict
     else:  # the DEM refuses [heat.internal]: the advice says so instead of recommending it
         assert "cannot resolve" in adv.biot_verdict and "add [heat.internal]" not in adv.biot_verdict
+
+
+def test_friction_heat_is_the_drive_power_of_a_half_filled_drum():
+    """Half-filled 2D drum: the bed's centre of mass sits at 4R/(3 pi) from the axis (centroid
+    of a half disc), offset sideways by sin(theta) at the angle of repose; in steady rotation
+    the drive's power omega M g x_c is all dissipated (docs/models/friction-heat.md)."""
+    import math
+
+    from drumheat.materials import material
+    from drumheat.scene import load_scene
+
+    base = load_scene("weigler-glass-drum-9.55")
+    R, d = 0.5 * base.drum.diameter, base.groups[0].diameter
+    n_half = int(round(0.8 * math.pi * R * R / 2 / (math.pi * d * d / 4)))
+    scene = load_scene("weigler-glass-drum-9.55",
+                       {"groups.0.count": n_half, "packing.surface_angle": 35.0})
+    terms = {t.name: t for t in explain(scene).terms}
+    fric = terms["friction heat"]
+    g0 = scene.groups[0]
+    rho = g0.density or material(g0.material).density
+    mass = n_half * rho * math.pi * d**3 / 6
+    omega = 2 * math.pi * scene.drum.rpm / 60
+    x_c = 4 * R / (3 * math.pi) * math.sin(math.radians(35.0))
+    # the fill is n_half's rounding away from exactly one half
+    assert fric.heat_flow * n_half == pytest.approx(omega * mass * 9.81 * x_c, rel=2e-3)
+    assert not fric.included and fric.verdict.startswith("negligible")
+    # still drum, no term; a drum turning 20x faster over a long run without wall heating:
+    # the friction heat is what warms the bed
+    assert "friction heat" not in {t.name for t in explain(
+        load_scene("weigler-glass-drum-9.55", {"drum.rpm": 0.0})).terms}
+    mill = load_scene("weigler-glass-drum-9.55", {"drum.rpm": 191.0,
+                                                  "drum.wall_temperature": 293.15})
+    fric = {t.name: t for t in explain(mill).terms}["friction heat"]
+    assert fric.verdict.startswith("should be added")

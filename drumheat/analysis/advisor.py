@@ -19,6 +19,12 @@ too, so the advisor can say which included effects are negligible and which abse
   section 4); absent: a black surrounding at the wall (else gas) temperature;
 * an external effect that is small at the start but acts over the whole run (``G t_run / (m c)
   >= 0.05``, it moves the bed mean by more than 5 % of its driving difference) is kept;
+* heat from friction (a source, not a conductance): in steady rotation the drive's work is all
+  dissipated in the bed, ``P = omega M g x_c`` with ``x_c = r_c sin(theta)`` the horizontal
+  offset of the bed's centre of mass (``r_c = 4 R sin^3(eps) / (3 (2 eps - sin 2 eps))``, the
+  centroid of the circular segment of the fill; ``theta`` the dynamic angle of repose:
+  ``packing.surface_angle`` if given, else ``atan(dem.friction)`` for a DEM bed, else 30 deg);
+  docs/models/friction-heat.md, where the DEM's heat equals the drive's work to 3e-5;
 * conduction inside the particles: the Biot number ``Bi = h R / lambda_p`` with ``h`` the sum
   of all surface coefficients of the included effects (the largest case: contacts and walls on
   their share of the surface) -- lumped particles are fine for Bi < 0.1.
@@ -62,10 +68,12 @@ class Term:
     note: str = ""
     relative: float = 0.0
     verdict: str = ""
+    power: float | None = None  # W per particle, for a source (no conductance, no dT)
+    rise: float = 0.0  # K, a source's warming of the bed over the run
 
     @property
     def heat_flow(self) -> float:
-        return abs(self.conductance * self.dT)
+        return abs(self.power) if self.power is not None else abs(self.conductance * self.dT)
 
 
 @dataclass
@@ -84,8 +92,10 @@ class Advice:
                 f"{'dT / K':>8} {'G dT / W':>10} {'relative':>9}  verdict")
         lines += [head, "-" * len(head)]
         for t in self.terms:
+            G, dT = (("-", "-") if t.power is not None else
+                     (f"{t.conductance:.3g}", f"{t.dT:.3g}"))
             lines.append(f"{t.name:<22} {t.table:<18} {'yes' if t.included else 'no':<8} "
-                         f"{t.conductance:>10.3g} {t.dT:>8.3g} {t.heat_flow:>10.3g} "
+                         f"{G:>10} {dT:>8} {t.heat_flow:>10.3g} "
                          f"{t.relative:>9.2%}  {t.verdict}")
             if t.note:
                 lines.append(f"{'':<22} {t.note}")
@@ -148,9 +158,19 @@ def _grade(terms, contact, scene, model) -> None:
     loss = scene.heat.loss is not None
     C = float(np.mean(np.asarray(model.particles.capacity)))
     duration = float(scene.run.duration)
+    drive = max((abs(t.dT) for t in terms if t.power is None), default=0.0)
     for t in terms:
         t.relative = t.heat_flow / big
         exposure = t.conductance * duration / C  # fraction of an e-folding over the run
+        if t.power is not None:  # a source: by its size, or by what it adds over the run
+            lasting = t.rise >= 0.05 * drive
+            t.verdict = ("keep" if t.included and (t.relative >= 0.01 or lasting) else
+                         "could be dropped (< 1 % of the largest)" if t.included else
+                         "should be added (> 5 % of the largest)" if t.relative >= 0.05 else
+                         f"should be added (warms the bed by {t.rise:.3g} K over the run, "
+                         f"> 5 % of the largest driving difference)" if lasting else
+                         "negligible (absent: fine)")
+            continue
         if t.included:
             if t.relative >= 0.01:
                 t.verdict = "keep"
@@ -258,6 +278,9 @@ def explain(scene) -> Advice:
                           a * A_s, Tg - T0, note))
     terms.append(_radiation_term(scene, eff, eps, T0, T_wall, Tg, frac_wall, A_s,
                                  seen_by_wall_layer=moving_bed, drum_bed=drum_bed))
+    friction = _friction_heat_term(scene, d, c)
+    if friction is not None:
+        terms.append(friction)
     # heat brought in or taken out at the boundary must pass the contacts: their driving
     # difference is at least the external one (a wall-heated bed starts uniform)
     if contact.conductance > 0:
@@ -320,10 +343,7 @@ def _wall_layer_fraction(scene, d):
     Returns ``(0, "")`` where no wall applies (granulator, fluidized bed, pneumatic channel).
     """
     N = scene.n_particles
-    dim = scene.dim
-    vol = sum(g.count * math.pi * g.diameter**3 / 6 for g in scene.groups)
-    area_p = sum(g.count * math.pi * g.diameter**2 / 4 for g in scene.groups)
-    beta, phi2 = 0.6, 0.8
+    beta = 0.6  # solids fraction of the bed (3D)
     if scene.motion.model == "moving_bed":
         h = scene.hopper
         g = hopper_walls(h)
@@ -333,12 +353,10 @@ def _wall_layer_fraction(scene, d):
     if dr is None or scene.motion.model in ("granulator", "fluidized", "pneumatic"):
         return 0.0, ""
     R = 0.5 * dr.diameter
-    if dim == 3:
-        if not dr.depth:
-            return 0.0, ""
-        bed_area, per_length = vol / (beta * dr.depth), dr.depth * d * beta / (math.pi * d**3 / 6)
-    else:
-        bed_area, per_length = area_p / phi2, 1.0 / d
+    if scene.dim == 3 and not dr.depth:
+        return 0.0, ""
+    bed_area = _bed_area(scene, d)
+    per_length = dr.depth * d * beta / (math.pi * d**3 / 6) if scene.dim == 3 else 1.0 / d
     if dr.sections:
         R2 = 0.5 * (dr.inner_diameter or 0.0)
         sec_area = (math.pi * (R * R - R2 * R2)) / dr.sections
@@ -351,14 +369,58 @@ def _wall_layer_fraction(scene, d):
                 "wetted walls and plates x one layer)")
     else:
         fill = min(0.99, bed_area / (math.pi * R * R))
-        lo, hi = 0.0, math.pi  # (2 eps - sin 2 eps) / (2 pi) grows from 0 to 1
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if (2 * mid - math.sin(2 * mid)) / (2 * math.pi) < fill else (lo,
-                                                                                          mid)
-        length = 2.0 * lo * R
+        length = 2.0 * _segment_half_angle(fill) * R
         note = f" (bed segment {fill:.0%} of the drum: wetted arc x one layer)"
     return min(1.0, length * per_length / N), note
+
+
+def _segment_half_angle(fill: float) -> float:
+    """Half central angle eps (rad) of the circular segment filling ``fill`` of a circle:
+    ``fill = (2 eps - sin 2 eps) / (2 pi)`` (herz-sectional-drum.md sec. 2 at ``R2 = 0``)."""
+    lo, hi = 0.0, math.pi  # the fill grows monotonically from 0 to 1
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if (2 * mid - math.sin(2 * mid)) / (2 * math.pi) < fill else (lo, mid)
+    return lo
+
+
+def _bed_area(scene, d) -> float:
+    """Cross-section of the bed in a plain drum, m2: the particles' volume over the depth at
+    solids fraction 0.6 (3D), their area at area fraction 0.8 (2D monolayer)."""
+    if scene.dim == 3:
+        return sum(g.count * math.pi * g.diameter**3 / 6 for g in scene.groups) / (
+            0.6 * scene.drum.depth)
+    return sum(g.count * math.pi * g.diameter**2 / 4 for g in scene.groups) / 0.8
+
+
+def _friction_heat_term(scene, d, c) -> Term | None:
+    """Heat from friction and damping in a turning plain drum: the drive's power in steady
+    rotation, ``omega M g x_c`` (see the module docstring), per particle; None where the scene
+    has no turning plain drum."""
+    dr = scene.drum
+    if (dr is None or not dr.rpm or dr.sections or (scene.dim == 3 and not dr.depth)
+            or scene.motion.model not in ("dem", "random", "replay", "mixing")):
+        return None
+    R = 0.5 * dr.diameter
+    fill = min(0.99, _bed_area(scene, d) / (math.pi * R * R))
+    eps = _segment_half_angle(fill)
+    r_c = 4 * R * math.sin(eps) ** 3 / (3 * (2 * eps - math.sin(2 * eps)))
+    if scene.packing.surface_angle is not None:
+        theta, why = math.radians(abs(scene.packing.surface_angle)), "packing.surface_angle"
+    elif scene.motion.model == "dem":
+        theta, why = math.atan(scene.dem.friction), "atan(dem.friction)"
+    else:
+        theta, why = math.radians(30.0), "nominal"
+    mass = sum(g.count * (g.density or material(g.material).density) * math.pi
+               * g.diameter**3 / 6 for g in scene.groups)
+    omega = 2 * math.pi * abs(dr.rpm) / 60
+    power = omega * mass * 9.81 * r_c * math.sin(theta)
+    rise = power * float(scene.run.duration) / (mass * c)
+    return Term("friction heat", "[heat.friction]", scene.heat.friction is not None, 0.0, 0.0,
+                f"estimate: drive power omega M g x_c = {power:.3g} W for the bed, x_c = "
+                f"{1e3 * r_c * math.sin(theta):.3g} mm at angle of repose "
+                f"{math.degrees(theta):.3g} deg ({why}); alone it would warm the bed by "
+                f"{rise:.3g} K over the run", power=power / scene.n_particles, rise=rise)
 
 
 def _schluender_alpha(scene, d):
