@@ -27,7 +27,7 @@ R_P = 0.002  # particle radius (m)
 
 
 def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling=True,
-         rotation=True, calm=False):
+         rotation=True, calm=False, friction_heat=None):
     """A small moving bed of two materials with rolling resistance in the lower half of an
     annulus between a rotating drum shell and a counter-rotating inner cylinder (2D, or a 3D
     slice with periodic z): spheres of 0.97-1 r on a 1.97 r lattice, jittered, so that many
@@ -36,7 +36,8 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     Coulomb limit, most not), a temperature gradient. ``calm``: for runs, a 2 r lattice that
     touches nothing yet (gaps up to 1e-4 d), moving slowly, no springs, set in motion by
     gravity (50 g) and the walls. Returns the DEM and a state (None for kernel "cpu": the
-    state of the "jax" twin serves both)."""
+    state of the "jax" twin serves both). ``friction_heat``: make_dem's (a FrictionHeat, or a
+    function of the particles that gives one)."""
     rng = np.random.default_rng(seed)
     R, r_in = 0.03, 0.008
     a = (2.0 if calm else 1.97) * R_P
@@ -79,7 +80,8 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     # round-off over hundreds of steps (at 0.25 t_crit the dense frictional bed amplifies them
     # by e every two steps, the same in either kernel); a thin skin for frequent rebuilds
     kw = dict(dim=dim, dt=2e-6 if calm else 1e-5, skin=0.00005 if calm else 0.0008,
-              dtype=dtype, pair_kernel=kernel, conduction=cond, rotation=rotation)
+              dtype=dtype, pair_kernel=kernel, conduction=cond, rotation=rotation,
+              friction_heat=friction_heat(part) if callable(friction_heat) else friction_heat)
     if dim == 3:
         kw["periodic_length"] = 4 * a
     if calm:  # 50 g: the bed forms within the few hundred steps of a test

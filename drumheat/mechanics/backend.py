@@ -33,8 +33,7 @@ class BackendChoice(NamedTuple):
 
 
 def choose_contact_backend(requested: str, *, dim: int, params, dtype,
-                           batched: bool = False, warn: bool = True,
-                           friction_heat: bool = False) -> BackendChoice:
+                           batched: bool = False, warn: bool = True) -> BackendChoice:
     """The contact kernel for a DEM.
 
     Main arguments
@@ -51,9 +50,6 @@ def choose_contact_backend(requested: str, *, dim: int, params, dtype,
         The DEM runs under ``vmap`` (an ensemble): the C++ loop cannot serve.
     warn : bool
         Issue one ``RuntimeWarning`` line when ``"cpu"`` was asked for and cannot serve.
-    friction_heat : bool
-        The run turns the contacts' losses into heat (``[heat.friction]``), which only the JAX
-        kernel computes.
     """
     if requested not in CONTACT_BACKENDS:
         raise ValueError(f"contact_backend must be one of {CONTACT_BACKENDS}, got {requested!r}")
@@ -67,7 +63,7 @@ def choose_contact_backend(requested: str, *, dim: int, params, dtype,
     elif jax.default_backend() != "cpu":
         reason = f"the C++ contact loop runs on the CPU, this run on {jax.default_backend()}"
     else:
-        reasons = cpu_kernel.unsupported_reasons(dim, params, dtype, None, friction_heat)
+        reasons = cpu_kernel.unsupported_reasons(dim, params, dtype, None)
         if reasons:
             reason = "; ".join(reasons)
         else:

@@ -32,12 +32,16 @@
 //  13 particle-particle tables (6, T, T) S: kn, kt, zeta_n, zeta_t, mu, mu_roll
 //  14 particle-wall tables (6, T, W) S: the same per particle type and wall
 //  15 wall angular velocities about z (W) S          16 temperatures (N or 0) f64
+//  17 wall distance before the step (N, W) S (friction heat; else length 0)
 // Attributes: dt, L (period of the last axis, 0 = none), law (conduction, < 0 = none), h
-// (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling).
+// (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling), fh
+// (1: friction heat).
 // Outputs: 0 forces (N, D), 1 torques (N, 3) or (N); 2 new pair springs (M, D); 3 overlap,
 // 4 centre distance, 5 normal force per pair (M); 6 new wall springs (N, W, D); 7 overlap and
 // 8 normal force per wall slot (N, W) (all zero where nothing touches); 9 the largest
-// overlap / radius (smaller radius of a pair) (1); 10 heat flow into each particle (N or 0) f64.
+// overlap / radius (smaller radius of a pair) (1); 10 heat flow into each particle (N or 0) f64;
+// friction heat (length 0 without fh): 11 pair rows (M, KP) S, 12 wall rows (N W, KW) S, 13 the
+// losses at the continuous rates (3) f64.
 //
 // Contact conduction (optional, law >= 0; drumheat/mechanics/conduction.py): the heat flow into
 // each particle Q_i = sum_j g_ij (T_j - T_i) over the conducting pairs, g = h pi min(r_i, r_j)^2
@@ -48,11 +52,31 @@
 // (the gap tolerance of drumheat.thermal.network.find_contacts_2d_drum). With law < 0, the
 // temperatures and Q have length 0.
 //
+// Friction heat (optional, fh = 1; drumheat/mechanics/dissipation.py): each contact's loss in
+// the step D = -dt (F . u + M_r . w_rel) - (U_new - U_old) needs the full-step velocities, which
+// exist only after the forces of all contacts are summed and the second half-kick is done. So
+// the loop writes one row per contact, KP = 3 D + DW + 1 values for a pair (the force F on j,
+// the levers a_i, a_j, the rolling torque M_r on j and U_new - U_old) and KW = 2 D + DW + 1 for
+// a wall slot (F, the lever, M_r, U_new - U_old), U = k_n delta^2 / 2 (while delta > 0) +
+// k_t |xi|^2 / 2 with the overlap before the step from the positions x - dt v (pairs) or the
+// wall distance before the step (input 17); a slot that does not touch has only -U_old, its
+// springs' energy, which the model discards. The loss rates by source (contact_law with
+// dissipation=True: damping, sliding; rolling_loss) are summed over all contacts (output 13).
+// The second pass, ContactHeat (cpu_kernel.contact_heat), takes the rows and the full-step
+// velocities and spins and gives each contact's D to its partners as step_heat does: particle
+// A gets k_A / (k_A + k_B) D and B the rest (conductivities (N) f64; length 0: half and half),
+// a wall contact's particle k_p / (k_p + k_w) D with the walls' k_w (attribute kw), the rest is
+// the walls'. ContactHeat's inputs: 0 velocities (N, D) S, 1 spins (N, 3) or (N) S, 2 pairs
+// (2, M) s32, 3 pair rows (M, KP) S, 4 wall rows (N W, KW) S, 5 wall velocity (N, W, D) S, 6
+// wall angular velocities (W) S, 7 conductivities (N or 0) f64; attributes dt, kw; outputs 0
+// the heat of each particle (N) f64, 1 the walls' and all contacts' (2) f64, J.
+//
 // Threads: the pair slots and wall slots are cut into C equal chunks, C = the threads of XLA's
 // intra-op pool, at most one chunk per MIN_CHUNK pair slots (DRUMHEAT_KERNEL_THREADS sets C).
 // The calling thread runs chunk 0 and then takes any chunk no pool thread has started; chunk c
-// accumulates its forces in its own buffer and the buffers are summed in chunk order, so the
-// result depends on C (round-off) and on nothing else, whichever thread ran which chunk.
+// accumulates its forces (and the second pass its heat) in its own buffer and the buffers are
+// summed in chunk order, so the result depends on C (round-off) and on nothing else, whichever
+// thread ran which chunk.
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -102,10 +126,12 @@ inline S dot(const S* a, const S* b) {
 // contact_forces.contact_law for one contact between partner A and partner B: unit normal n
 // from A to B, overlap ov > 0, relative velocity vr of B's contact point against A's, effective
 // mass me, old spring so. Writes the new spring to s (which may be so: the springs are updated
-// in place) and returns the normal force F_n; f receives the force on B.
+// in place) and returns the normal force F_n; f receives the force on B. With loss (friction
+// heat) loss[0] += the dashpots' loss and loss[1] += the Coulomb limit's of the step, J
+// (contact_law(dissipation=True): damping_loss, slip_loss).
 template <typename S, int D>
 inline S contact(const Law<S>& c, S dt, const S* n, S ov, const S* vr, S me, const S* so, S* s,
-                 S* f) {
+                 S* f, double* loss = nullptr) {
   const S sqm = std::sqrt(me);
   const S vn = dot<S, D>(vr, n);  // > 0: separating
   S fn = c.kn*ov - S(2)*c.zn*c.sqkn*sqm*vn;  // k_n delta + gamma_n d(delta)/dt
@@ -123,10 +149,21 @@ inline S contact(const Law<S>& c, S dt, const S* n, S ov, const S* vr, S me, con
   const S fc = c.mu*fn;
   if (fl > fc) {  // sliding: the spring is kept at the Coulomb limit, no tangential dashpot
     const S ratio = fc / fl;
-    for (int a = 0; a < D; ++a) { ft[a] = fs[a]*ratio; x[a] = -ft[a]/c.kt; }
+    S slip[D];
+    for (int a = 0; a < D; ++a) {
+      ft[a] = fs[a]*ratio;
+      const S xl = -ft[a]/c.kt;
+      slip[a] = x[a] - xl;
+      x[a] = xl;
+    }
+    if (loss) {
+      loss[0] += double((c.kn*ov - fn)*vn*dt);
+      loss[1] += double(fc*std::sqrt(dot<S, D>(slip, slip)));
+    }
   } else {
     const S gt = S(2)*c.zt*c.sqkt*sqm;
     for (int a = 0; a < D; ++a) ft[a] = fs[a] - gt*vt[a];
+    if (loss) loss[0] += double(((c.kn*ov - fn)*vn + gt*dot<S, D>(vt, vt))*dt);
   }
   for (int a = 0; a < D; ++a) { s[a] = x[a]; f[a] = fn*n[a] + ft[a]; }  // so not read after
   return fn;
@@ -148,6 +185,16 @@ inline void rolling(const S* w, S fn, S reff, S mur, S ieff, S dt, S* M) {
     const S k = cap / (mag > S(0) ? mag : S(1));
     M[0] = -(k*w[0]); M[1] = -(k*w[1]); M[2] = -(k*w[2]);
   }
+}
+
+// contact_forces.rolling_loss: the energy the rolling torque M takes from the relative spin w
+// in one step, |M| dt max(|w| - |M| dt / (2 I*), 0), J
+template <typename S, int DW>
+inline double rolling_loss(const S* M, const S* w, S ieff, S dt) {
+  S mm = M[0]*M[0], ww = w[0]*w[0];
+  if constexpr (DW == 3) { mm += M[1]*M[1] + M[2]*M[2]; ww += w[1]*w[1] + w[2]*w[2]; }
+  const S m = std::sqrt(mm), rest = std::sqrt(ww) - S(0.5)*m*dt/ieff;
+  return double(m*dt*(rest > S(0) ? rest : S(0)));
 }
 
 // w x a: a 3-vector in 3D; in 2D w is the z component: w e_z x a = w (-a_y, a_x)
@@ -228,185 +275,293 @@ void help(const std::shared_ptr<Job>& job) {
   job->active.fetch_sub(1);
 }
 
-// the buffers of one call, untyped (their dtype is checked in ContactsImpl)
-struct Call {
-  const void *x, *v, *w, *r, *ms, *in, *sp, *wd, *wn, *wv, *ws, *tpp, *tpw, *wom;
-  const int32_t *pt, *P;
-  const double* temp;
-  void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX;
-  double* Q;
-  int64_t n, m, nw, nt;
-  double dt, L, h, tol;
-  int law;
-  bool rot;
-};
-
-template <typename S, int D>
-void run(ffi::ThreadPool& pool, const Call& a) {
-  constexpr int DW = D == 3 ? 3 : 1;  // spin and torque components
-  const int64_t n = a.n, m = a.m, nw = a.nw, nt = a.nt;
-  const S *x = static_cast<const S*>(a.x), *v = static_cast<const S*>(a.v);
-  const S *w = static_cast<const S*>(a.w), *r = static_cast<const S*>(a.r);
-  const S *ms = static_cast<const S*>(a.ms), *in = static_cast<const S*>(a.in);
-  const S *sp = static_cast<const S*>(a.sp), *WD = static_cast<const S*>(a.wd);
-  const S *WN = static_cast<const S*>(a.wn), *WV = static_cast<const S*>(a.wv);
-  const S *WS = static_cast<const S*>(a.ws), *WOM = static_cast<const S*>(a.wom);
-  const int32_t *pt = a.pt, *P = a.P;
-  S *Sn = static_cast<S*>(a.S), *WSo = static_cast<S*>(a.WS);
-  S *OV = static_cast<S*>(a.OV), *DI = static_cast<S*>(a.DI), *FN = static_cast<S*>(a.FN);
-  S *WO = static_cast<S*>(a.WO), *WF = static_cast<S*>(a.WF);
-  const double* TK = a.temp;
-  const bool heat_on = a.law >= 0, gap_on = heat_on && a.tol > 0, rot = a.rot;
-  const S dt = S(a.dt), L = S(a.L), tol = S(a.tol);
-  const std::vector<Law<S>> pp = laws<S>(static_cast<const S*>(a.tpp), nt, nt);
-  const std::vector<Law<S>> pw = laws<S>(static_cast<const S*>(a.tpw), nt, nw);
-  const bool one_type = nt == 1;
-  bool roll_pp = false, roll_pw = false;
-  for (const auto& c : pp) roll_pp = roll_pp || c.mur > S(0);
-  for (const auto& c : pw) roll_pw = roll_pw || c.mur > S(0);
-  roll_pp = roll_pp && rot;
-  roll_pw = roll_pw && rot;
-
-  // pair slots [k0, k1) and wall slots [s0, s1) into the accumulators F (N, D), T (N, DW) and
-  // Q (N); returns the largest overlap ratio seen. Per-slot outputs are disjoint between chunks.
-  auto work = [&](int64_t k0, int64_t k1, int64_t s0, int64_t s1, S* F, S* T,
-                  double* Q) -> S {
-    S max_ov = S(0);
-    for (int64_t k = k0; k < k1; ++k) {
-      const int32_t i = P[k], j = P[m + k];
-      S* s = Sn + D*k;
-      OV[k] = S(0); DI[k] = S(0); FN[k] = S(0);
-      if (i >= n) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
-      S d[D];  // from i to j
-      for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
-      // nearest periodic image of the last axis (positions are kept in [0, L), so |d| < L);
-      // the same as d - L rint(d / L), without a libm call per slot
-      if constexpr (D == 3)
-        if (L > S(0)) d[2] = d[2] > S(0.5)*L ? d[2] - L : (d[2] < S(-0.5)*L ? d[2] + L : d[2]);
-      const S dist2 = dot<S, D>(d, d);
-      const S ri = r[i], rj = r[j];
-      const S rs = ri + rj;
-      const S rmin = ri < rj ? ri : rj;
-      // conduction across a gap of at most tol min(d_i, d_j)
-      const S gap = gap_on ? tol*(S(2)*rmin) : S(0);
-      // a cheap test first: the exact one below (on the overlap, as the JAX kernel decides)
-      // cannot pass beyond this bound
-      const S reach = rs + gap;
-      if (dist2 > reach*reach*S(1.0001)) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
-      const S dist = std::sqrt(dist2);
-      const S ov = rs - dist;
-      if (!(ov > S(0))) {
-        for (int c = 0; c < D; ++c) s[c] = S(0);
-        if (gap_on && ov >= -gap) {
-          const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
-          Q[i] += q; Q[j] -= q;
-        }
-        continue;
-      }
-      const S inv = dist > S(0) ? S(1) / dist : S(0);
-      S nr[D], ai[D], aj[D], ci[D], cj[D], vr[D], f[D];
-      const S li = ri - S(0.5)*ov, lj = -(rj - S(0.5)*ov);
-      for (int c = 0; c < D; ++c) { nr[c] = d[c]*inv; ai[c] = li*nr[c]; aj[c] = lj*nr[c]; }
-      spin_cross<S, D>(w + DW*i, ai, ci);
-      spin_cross<S, D>(w + DW*j, aj, cj);
-      for (int c = 0; c < D; ++c) vr[c] = (v[D*j + c] + cj[c]) - (v[D*i + c] + ci[c]);
-      const Law<S>& law = one_type ? pp[0] : pp[pt[i]*nt + pt[j]];
-      const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[i]*ms[j]/(ms[i] + ms[j]), sp + D*k, s,
-                                 f);
-      FN[k] = fn;
-      for (int c = 0; c < D; ++c) { F[D*j + c] += f[c]; F[D*i + c] -= f[c]; }
-      if (rot) {
-        add_torque<S, D>(T + DW*i, ai, f, S(-1));  // a_i x (-f)
-        add_torque<S, D>(T + DW*j, aj, f, S(1));   // a_j x f
-        if (roll_pp) {
-          S wr[DW], M[DW];
-          for (int c = 0; c < DW; ++c) wr[c] = w[DW*j + c] - w[DW*i + c];
-          const S ii = in[i], ij = in[j];
-          rolling<S, DW>(wr, fn, ri*rj/(ri + rj), law.mur, ii*ij/(ii + ij), dt, M);
-          for (int c = 0; c < DW; ++c) { T[DW*j + c] += M[c]; T[DW*i + c] -= M[c]; }
-        }
-      }
-      OV[k] = ov; DI[k] = dist;
-      if (heat_on) {
-        const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
-        Q[i] += q; Q[j] -= q;
-      }
-      const S ratio_ov = ov / rmin;
-      if (ratio_ov > max_ov) max_ov = ratio_ov;
-    }
-    // walls: partner A is the wall (spin omega_wall about z, infinite mass), B the particle
-    for (int64_t q = s0; q < s1; ++q) {
-      const int64_t p = q / nw, wl = q % nw;
-      S* s = WSo + D*q;
-      const S rp = r[p];
-      const S ov = rp - WD[q];
-      WO[q] = S(0); WF[q] = S(0);
-      if (!(ov > S(0))) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
-      const S* nr = WN + D*q;
-      const S l = -(rp - S(0.5)*ov);
-      S al[D], cw[D], vr[D], f[D];
-      for (int c = 0; c < D; ++c) al[c] = l*nr[c];
-      spin_cross<S, D>(w + DW*p, al, cw);
-      for (int c = 0; c < D; ++c) vr[c] = v[D*p + c] + cw[c] - WV[D*q + c];
-      const Law<S>& law = pw[(one_type ? 0 : pt[p])*nw + wl];
-      const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[p], WS + D*q, s, f);
-      WF[q] = fn;
-      for (int c = 0; c < D; ++c) F[D*p + c] += f[c];
-      if (rot) {
-        add_torque<S, D>(T + DW*p, al, f, S(1));
-        if (roll_pw) {
-          S wr[DW], M[DW];
-          for (int c = 0; c < DW; ++c) wr[c] = w[DW*p + c];
-          wr[DW - 1] -= WOM[wl];  // the wall spins about z
-          rolling<S, DW>(wr, fn, rp, law.mur, in[p], dt, M);
-          for (int c = 0; c < DW; ++c) T[DW*p + c] += M[c];
-        }
-      }
-      WO[q] = ov;
-      if (ov / rp > max_ov) max_ov = ov / rp;
-    }
-    return max_ov;
-  };
-
-  S* F0 = static_cast<S*>(a.F);
-  S* T0 = static_cast<S*>(a.T);
-  double* Q0 = a.Q;
-  std::memset(F0, 0, sizeof(S) * D * n);
-  std::memset(T0, 0, sizeof(S) * DW * n);
-  if (heat_on) std::memset(Q0, 0, sizeof(double) * n);
-  const int64_t slots = n * nw;
+// the number of chunks C for m pair slots (see the header)
+int64_t chunk_count(ffi::ThreadPool& pool, int64_t m) {
   int64_t nc = pool.num_threads();
   if (nc > m / MIN_CHUNK) nc = m / MIN_CHUNK;
   if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nc = std::atoi(e);  // exactly
   if (nc > m) nc = m;
   if (nc < 1) nc = 1;
-  S* MX = static_cast<S*>(a.MX);
-  if (nc == 1) {
-    MX[0] = work(0, m, 0, slots, F0, T0, Q0);
-    return;
-  }
-  // a buffer holds the (D + DW) N forces and torques in its first fs doubles, then N doubles
-  const int64_t fs = (static_cast<int64_t>(sizeof(S)) * (D + DW) * n + 7) / 8;
-  std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
-  for (auto& b : acc) b = take_buffer(fs + n);
-  std::vector<S> mx(nc, S(0));
+  return nc;
+}
+
+// run(c) for the chunks c = 0 .. nc - 1: chunk 0 on the calling thread, the others on whichever
+// thread takes them first; returns when all are done
+void for_chunks(ffi::ThreadPool& pool, int64_t nc, std::function<void(int)> run) {
+  if (nc == 1) { run(0); return; }
   auto job = std::make_shared<Job>();
   job->nchunks = static_cast<int>(nc);
-  job->run = [&](int c) {
-    S *F = F0, *T = T0;
-    double* Q = Q0;
-    if (c > 0) {
-      double* b = acc[c - 1]->data();
-      F = reinterpret_cast<S*>(b); T = F + D * n; Q = b + fs;
-      std::memset(b, 0, sizeof(double) * (heat_on ? fs + n : fs));
-    }
-    mx[c] = work(m * c / nc, m * (c + 1) / nc, slots * c / nc, slots * (c + 1) / nc, F, T, Q);
-  };
+  job->run = std::move(run);
   for (int64_t t = 1; t < nc; ++t) pool.Schedule([job] { help(job); });
   job->run(0);
   for (int c = job->next.fetch_add(1); c < job->nchunks; c = job->next.fetch_add(1)) job->run(c);
   job->closed.store(true);
   while (job->active.load() != 0) std::this_thread::yield();
+}
+
+// Friction heat, per contact (see the header): the spring energy before the step,
+// k_n delta_0^2 / 2 (while delta_0 > 0) + k_t |xi_old|^2 / 2, as ContactForces' _pair_work and
+// _spring_energy_and_rates compute it; xi2 = |xi_old|^2
+template <typename S>
+inline S energy_before(const Law<S>& c, S ov0, S xi2) {
+  return (ov0 > S(0) ? S(0.5)*c.kn*(ov0*ov0) : S(0)) + S(0.5)*c.kt*xi2;
+}
+
+// a contact that does not touch now: D = U_old; the tangential spring's energy is booked as
+// sliding (contact_law: the release of a contact that opens)
+template <typename S>
+inline void opened(const Law<S>& c, S ov0, S xi2, S* dU, double* R) {
+  *dU = -energy_before<S>(c, ov0, xi2);
+  R[1] += double(S(0.5)*c.kt*xi2);
+}
+
+// the overlap of a pair before the step, at the positions before the drift x - dt v (the JAX
+// kernel's `prev`), with the nearest periodic image of the last axis
+template <typename S, int D>
+inline S overlap_before(const S* xi, const S* xj, const S* vi, const S* vj, S rs, S dt, S L) {
+  S d0[D];
+  for (int c = 0; c < D; ++c) d0[c] = (xj[c] - dt*vj[c]) - (xi[c] - dt*vi[c]);
+  if constexpr (D == 3)
+    if (L > S(0)) d0[2] = d0[2] > S(0.5)*L ? d0[2] - L : (d0[2] < S(-0.5)*L ? d0[2] + L : d0[2]);
+  return rs - std::sqrt(dot<S, D>(d0, d0));
+}
+
+// the buffers of one call, untyped (their dtype is checked in ContactsImpl)
+struct Call {
+  const void *x, *v, *w, *r, *ms, *in, *sp, *wd, *wn, *wv, *ws, *tpp, *tpw, *wom, *wd0;
+  const int32_t *pt, *P;
+  const double* temp;
+  void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX, *PW, *WW;
+  double *Q, *R;
+  int64_t n, m, nw, nt;
+  double dt, L, h, tol;
+  int law;
+  bool rot, fh;
+};
+
+// The typed buffers and constants of one call of the loop (run): pairs() and walls() compute the
+// pair slots [k0, k1) and the wall slots [s0, s1) of a chunk into its accumulators F (N, D),
+// T (N, DW), Q (N) and R (3, the loss rates of friction heat) and return the largest overlap
+// ratio seen. Per-slot outputs are disjoint between chunks.
+template <typename S, int D>
+struct Loop {
+  static constexpr int DW = D == 3 ? 3 : 1;  // spin and torque components
+  static constexpr int KP = 3*D + DW + 1, KW = 2*D + DW + 1;  // friction heat rows (header)
+  const Call& a;
+  int64_t n, m, nw, nt;
+  const S *x, *v, *w, *r, *ms, *in, *sp, *WD, *WN, *WV, *WS, *WOM, *WD0;
+  const int32_t *pt, *P;
+  S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;
+  const double* TK;
+  bool heat_on, gap_on, rot, fh, one_type, roll_pp = false, roll_pw = false;
+  S dt, L, tol;
+  std::vector<Law<S>> pp, pw;
+
+  explicit Loop(const Call& c) : a(c), n(c.n), m(c.m), nw(c.nw), nt(c.nt) {
+    x = static_cast<const S*>(a.x); v = static_cast<const S*>(a.v);
+    w = static_cast<const S*>(a.w); r = static_cast<const S*>(a.r);
+    ms = static_cast<const S*>(a.ms); in = static_cast<const S*>(a.in);
+    sp = static_cast<const S*>(a.sp); WD = static_cast<const S*>(a.wd);
+    WN = static_cast<const S*>(a.wn); WV = static_cast<const S*>(a.wv);
+    WS = static_cast<const S*>(a.ws); WOM = static_cast<const S*>(a.wom);
+    WD0 = static_cast<const S*>(a.wd0);
+    pt = a.pt; P = a.P;
+    Sn = static_cast<S*>(a.S); WSo = static_cast<S*>(a.WS);
+    OV = static_cast<S*>(a.OV); DI = static_cast<S*>(a.DI); FN = static_cast<S*>(a.FN);
+    WO = static_cast<S*>(a.WO); WF = static_cast<S*>(a.WF);
+    PW = static_cast<S*>(a.PW); WW = static_cast<S*>(a.WW);
+    TK = a.temp;
+    heat_on = a.law >= 0; gap_on = heat_on && a.tol > 0; rot = a.rot; fh = a.fh;
+    dt = S(a.dt); L = S(a.L); tol = S(a.tol);
+    pp = laws<S>(static_cast<const S*>(a.tpp), nt, nt);
+    pw = laws<S>(static_cast<const S*>(a.tpw), nt, nw);
+    one_type = nt == 1;
+    for (const auto& c : pp) roll_pp = roll_pp || c.mur > S(0);
+    for (const auto& c : pw) roll_pw = roll_pw || c.mur > S(0);
+    roll_pp = roll_pp && rot;
+    roll_pw = roll_pw && rot;
+  }
+
+  S pairs(int64_t k0, int64_t k1, S* F, S* T, double* Q, double* R) const {
+    S max_ov = S(0);
+  for (int64_t k = k0; k < k1; ++k) {
+    const int32_t i = P[k], j = P[m + k];
+    S* s = Sn + D*k;
+    const S* so = sp + D*k;
+    S* hw = fh ? PW + KP*k : nullptr;  // friction heat row (header)
+    if (fh) for (int c = 0; c < KP; ++c) hw[c] = S(0);
+    OV[k] = S(0); DI[k] = S(0); FN[k] = S(0);
+    if (i >= n) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
+    S d[D];  // from i to j
+    for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
+    // nearest periodic image of the last axis (positions are kept in [0, L), so |d| < L);
+    // the same as d - L rint(d / L), without a libm call per slot
+    if constexpr (D == 3)
+      if (L > S(0)) d[2] = d[2] > S(0.5)*L ? d[2] - L : (d[2] < S(-0.5)*L ? d[2] + L : d[2]);
+    const S dist2 = dot<S, D>(d, d);
+    const S ri = r[i], rj = r[j];
+    const S rs = ri + rj;
+    const S rmin = ri < rj ? ri : rj;
+    const Law<S>& law = one_type ? pp[0] : pp[pt[i]*nt + pt[j]];
+    // friction heat: the springs' energy before the step (read before the spring is written)
+    const S xi2 = fh ? dot<S, D>(so, so) : S(0);
+    const S ov0 = fh ? overlap_before<S, D>(x + D*i, x + D*j, v + D*i, v + D*j, rs, dt, L)
+                     : S(0);
+    // conduction across a gap of at most tol min(d_i, d_j)
+    const S gap = gap_on ? tol*(S(2)*rmin) : S(0);
+    // a cheap test first: the exact one below (on the overlap, as the JAX kernel decides)
+    // cannot pass beyond this bound
+    const S reach = rs + gap;
+    if (dist2 > reach*reach*S(1.0001)) {
+      if (fh) opened<S>(law, ov0, xi2, hw + KP - 1, R);
+      for (int c = 0; c < D; ++c) s[c] = S(0);
+      continue;
+    }
+    const S dist = std::sqrt(dist2);
+    const S ov = rs - dist;
+    if (!(ov > S(0))) {
+      if (fh) opened<S>(law, ov0, xi2, hw + KP - 1, R);
+      for (int c = 0; c < D; ++c) s[c] = S(0);
+      if (gap_on && ov >= -gap) {
+        const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
+        Q[i] += q; Q[j] -= q;
+      }
+      continue;
+    }
+    const S inv = dist > S(0) ? S(1) / dist : S(0);
+    S nr[D], ai[D], aj[D], ci[D], cj[D], vr[D], f[D], M[DW] = {};
+    const S li = ri - S(0.5)*ov, lj = -(rj - S(0.5)*ov);
+    for (int c = 0; c < D; ++c) { nr[c] = d[c]*inv; ai[c] = li*nr[c]; aj[c] = lj*nr[c]; }
+    spin_cross<S, D>(w + DW*i, ai, ci);
+    spin_cross<S, D>(w + DW*j, aj, cj);
+    for (int c = 0; c < D; ++c) vr[c] = (v[D*j + c] + cj[c]) - (v[D*i + c] + ci[c]);
+    const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[i]*ms[j]/(ms[i] + ms[j]), so, s, f,
+                               fh ? R : nullptr);
+    FN[k] = fn;
+    for (int c = 0; c < D; ++c) { F[D*j + c] += f[c]; F[D*i + c] -= f[c]; }
+    if (rot) {
+      add_torque<S, D>(T + DW*i, ai, f, S(-1));  // a_i x (-f)
+      add_torque<S, D>(T + DW*j, aj, f, S(1));   // a_j x f
+      if (roll_pp) {
+        S wr[DW];
+        for (int c = 0; c < DW; ++c) wr[c] = w[DW*j + c] - w[DW*i + c];
+        const S ii = in[i], ij = in[j], ieff = ii*ij/(ii + ij);
+        rolling<S, DW>(wr, fn, ri*rj/(ri + rj), law.mur, ieff, dt, M);
+        for (int c = 0; c < DW; ++c) { T[DW*j + c] += M[c]; T[DW*i + c] -= M[c]; }
+        if (fh) R[2] += rolling_loss<S, DW>(M, wr, ieff, dt);
+      }
+    }
+    if (fh) {
+      for (int c = 0; c < D; ++c) { hw[c] = f[c]; hw[D + c] = ai[c]; hw[2*D + c] = aj[c]; }
+      for (int c = 0; c < DW; ++c) hw[3*D + c] = M[c];
+      hw[KP - 1] = (S(0.5)*law.kn*(ov*ov) + S(0.5)*law.kt*dot<S, D>(s, s))
+                   - energy_before<S>(law, ov0, xi2);
+    }
+    OV[k] = ov; DI[k] = dist;
+    if (heat_on) {
+      const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
+      Q[i] += q; Q[j] -= q;
+    }
+    const S ratio_ov = ov / rmin;
+    if (ratio_ov > max_ov) max_ov = ratio_ov;
+  }
+  return max_ov;
+  }
+
+  // walls: partner A is the wall (spin omega_wall about z, infinite mass), B the particle
+  S walls(int64_t s0, int64_t s1, S* F, S* T, double* R) const {
+    S max_ov = S(0);
+  for (int64_t q = s0; q < s1; ++q) {
+    const int64_t p = q / nw, wl = q % nw;
+    S* s = WSo + D*q;
+    const S* so = WS + D*q;
+    S* hw = fh ? WW + KW*q : nullptr;  // friction heat row (header)
+    if (fh) for (int c = 0; c < KW; ++c) hw[c] = S(0);
+    const S rp = r[p];
+    const S ov = rp - WD[q];
+    const Law<S>& law = pw[(one_type ? 0 : pt[p])*nw + wl];
+    const S xi2 = fh ? dot<S, D>(so, so) : S(0);
+    const S ov0 = fh ? rp - WD0[q] : S(0);  // the walls before the step, from JAX
+    WO[q] = S(0); WF[q] = S(0);
+    if (!(ov > S(0))) {
+      if (fh) opened<S>(law, ov0, xi2, hw + KW - 1, R);
+      for (int c = 0; c < D; ++c) s[c] = S(0);
+      continue;
+    }
+    const S* nr = WN + D*q;
+    const S l = -(rp - S(0.5)*ov);
+    S al[D], cw[D], vr[D], f[D], M[DW] = {};
+    for (int c = 0; c < D; ++c) al[c] = l*nr[c];
+    spin_cross<S, D>(w + DW*p, al, cw);
+    for (int c = 0; c < D; ++c) vr[c] = v[D*p + c] + cw[c] - WV[D*q + c];
+    const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[p], so, s, f, fh ? R : nullptr);
+    WF[q] = fn;
+    for (int c = 0; c < D; ++c) F[D*p + c] += f[c];
+    if (rot) {
+      add_torque<S, D>(T + DW*p, al, f, S(1));
+      if (roll_pw) {
+        S wr[DW];
+        for (int c = 0; c < DW; ++c) wr[c] = w[DW*p + c];
+        wr[DW - 1] -= WOM[wl];  // the wall spins about z
+        rolling<S, DW>(wr, fn, rp, law.mur, in[p], dt, M);
+        for (int c = 0; c < DW; ++c) T[DW*p + c] += M[c];
+        if (fh) R[2] += rolling_loss<S, DW>(M, wr, in[p], dt);
+      }
+    }
+    if (fh) {
+      for (int c = 0; c < D; ++c) { hw[c] = f[c]; hw[D + c] = al[c]; }
+      for (int c = 0; c < DW; ++c) hw[2*D + c] = M[c];
+      hw[KW - 1] = (S(0.5)*law.kn*(ov*ov) + S(0.5)*law.kt*dot<S, D>(s, s))
+                   - energy_before<S>(law, ov0, xi2);
+    }
+    WO[q] = ov;
+    if (ov / rp > max_ov) max_ov = ov / rp;
+  }
+  return max_ov;
+  }
+};
+
+template <typename S, int D>
+void run(ffi::ThreadPool& pool, const Call& a) {
+  constexpr int DW = Loop<S, D>::DW;
+  const Loop<S, D> lp(a);
+  const int64_t n = a.n, m = a.m;
+  const bool heat_on = lp.heat_on;
+  auto work = [&](int64_t k0, int64_t k1, int64_t s0, int64_t s1, S* F, S* T, double* Q,
+                  double* R) -> S {
+    const S p = lp.pairs(k0, k1, F, T, Q, R), q = lp.walls(s0, s1, F, T, R);
+    return p > q ? p : q;
+  };
+
+  S* F0 = static_cast<S*>(a.F);
+  S* T0 = static_cast<S*>(a.T);
+  double *Q0 = a.Q, *R0 = a.R;
+  std::memset(F0, 0, sizeof(S) * D * n);
+  std::memset(T0, 0, sizeof(S) * DW * n);
+  if (heat_on) std::memset(Q0, 0, sizeof(double) * n);
+  std::memset(R0, 0, sizeof(double) * 3);
+  const int64_t slots = n * a.nw;
+  const int64_t nc = chunk_count(pool, m);
+  S* MX = static_cast<S*>(a.MX);
+  // a buffer holds the (D + DW) N forces and torques in its first fs doubles, then N doubles
+  // of conduction heat, then 3 of loss rates (chunk 0 writes into the outputs)
+  const int64_t fs = (static_cast<int64_t>(sizeof(S)) * (D + DW) * n + 7) / 8;
+  std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
+  for (auto& b : acc) b = take_buffer(fs + n + 3);
+  std::vector<S> mx(nc, S(0));
+  for_chunks(pool, nc, [&](int c) {
+    S *F = F0, *T = T0;
+    double *Q = Q0, *R = R0;
+    if (c > 0) {
+      double* b = acc[c - 1]->data();
+      F = reinterpret_cast<S*>(b); T = F + D * n; Q = b + fs; R = b + fs + n;
+      std::memset(b, 0, sizeof(double) * fs);
+      std::memset(R, 0, sizeof(double) * 3);
+      if (heat_on) std::memset(Q, 0, sizeof(double) * n);
+    }
+    mx[c] = work(m * c / nc, m * (c + 1) / nc, slots * c / nc, slots * (c + 1) / nc, F, T, Q,
+                 R);
+  });
   S max_ov = mx[0];
   for (int64_t c = 1; c < nc; ++c) {
     const double* b = acc[c - 1]->data();
@@ -415,10 +570,83 @@ void run(ffi::ThreadPool& pool, const Call& a) {
     for (int64_t q = 0; q < DW * n; ++q) T0[q] += f[D * n + q];
     if (heat_on)
       for (int64_t q = 0; q < n; ++q) Q0[q] += b[fs + q];
+    for (int q = 0; q < 3; ++q) R0[q] += b[fs + n + q];
     if (mx[c] > max_ov) max_ov = mx[c];
   }
   for (auto& b : acc) give_buffer(std::move(b));
   MX[0] = max_ov;
+}
+
+// the buffers of one call of the friction heat's second pass (ContactHeatImpl)
+struct HeatCall {
+  const void *v, *w, *PW, *WW, *wv, *wom;
+  const int32_t* P;
+  const double* K;  // conductivities (N), or null: half and half
+  double *E, *SUM;
+  int64_t n, m, nw;
+  double dt, kw;
+};
+
+// Friction heat, second pass (see the header): each contact's loss D at the full-step
+// velocities from the rows of the first pass, split between its partners (dissipation.step_heat)
+template <typename S, int D>
+void heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
+  constexpr int DW = D == 3 ? 3 : 1;
+  constexpr int KP = 3*D + DW + 1, KW = 2*D + DW + 1;
+  const int64_t n = a.n, m = a.m, nw = a.nw, slots = n * nw;
+  const S *v = static_cast<const S*>(a.v), *w = static_cast<const S*>(a.w);
+  const S *PW = static_cast<const S*>(a.PW), *WW = static_cast<const S*>(a.WW);
+  const S *WV = static_cast<const S*>(a.wv), *WOM = static_cast<const S*>(a.wom);
+  const int32_t* P = a.P;
+  const double *K = a.K, dt = a.dt, kw = a.kw;
+  // E (N) the particles' heat, sums[0] the walls', sums[1] all of it
+  auto work = [&](int64_t k0, int64_t k1, int64_t s0, int64_t s1, double* E, double* sums) {
+    for (int64_t k = k0; k < k1; ++k) {
+      const int32_t i = P[k], j = P[m + k];
+      if (i >= n) continue;
+      const S* h = PW + KP*k;  // force, lever_i, lever_j, rolling torque, dU
+      S ci[D], cj[D], pw = S(0), pr = S(0);
+      spin_cross<S, D>(w + DW*i, h + D, ci);
+      spin_cross<S, D>(w + DW*j, h + 2*D, cj);
+      for (int c = 0; c < D; ++c) pw += h[c]*((v[D*j + c] + cj[c]) - (v[D*i + c] + ci[c]));
+      for (int c = 0; c < DW; ++c) pr += h[3*D + c]*(w[DW*j + c] - w[DW*i + c]);
+      const double loss = -dt*(double(pw) + double(pr)) - double(h[KP - 1]);
+      const double share = K ? K[i] / (K[i] + K[j]) : 0.5;
+      E[i] += share*loss; E[j] += (1.0 - share)*loss; sums[1] += loss;
+    }
+    for (int64_t q = s0; q < s1; ++q) {
+      const int64_t p = q / nw;
+      const S* h = WW + KW*q;  // force, lever, rolling torque, dU
+      S cw[D], pw = S(0), pr = S(0);
+      spin_cross<S, D>(w + DW*p, h + D, cw);
+      for (int c = 0; c < D; ++c) pw += h[c]*(v[D*p + c] + cw[c] - WV[D*q + c]);
+      for (int c = 0; c < DW; ++c)
+        pr += h[2*D + c]*(w[DW*p + c] - (c == DW - 1 ? WOM[q % nw] : S(0)));
+      const double loss = -dt*(double(pw) + double(pr)) - double(h[KW - 1]);
+      const double share = K ? K[p] / (K[p] + kw) : 0.5;
+      E[p] += share*loss; sums[0] += (1.0 - share)*loss; sums[1] += loss;
+    }
+  };
+  double *E0 = a.E, *S0 = a.SUM;
+  std::memset(E0, 0, sizeof(double) * n);
+  S0[0] = S0[1] = 0.0;
+  const int64_t nc = chunk_count(pool, m);
+  std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
+  for (auto& b : acc) b = take_buffer(n + 2);
+  for_chunks(pool, nc, [&](int c) {
+    double *E = E0, *sums = S0;
+    if (c > 0) {
+      E = acc[c - 1]->data(); sums = E + n;
+      std::memset(E, 0, sizeof(double) * (n + 2));
+    }
+    work(m * c / nc, m * (c + 1) / nc, slots * c / nc, slots * (c + 1) / nc, E, sums);
+  });
+  for (int64_t c = 1; c < nc; ++c) {
+    const double* b = acc[c - 1]->data();
+    for (int64_t q = 0; q < n; ++q) E0[q] += b[q];
+    S0[0] += b[n]; S0[1] += b[n + 1];
+  }
+  for (auto& b : acc) give_buffer(std::move(b));
 }
 
 }  // namespace
@@ -428,23 +656,25 @@ static ffi::Error ContactsImpl(
     ffi::AnyBuffer rad, ffi::AnyBuffer mass, ffi::AnyBuffer inertia, ffi::Buffer<ffi::S32> ptype,
     ffi::Buffer<ffi::S32> pairs, ffi::AnyBuffer spring, ffi::AnyBuffer wdist, ffi::AnyBuffer wnrm,
     ffi::AnyBuffer wvel, ffi::AnyBuffer wspring, ffi::AnyBuffer tab_pp, ffi::AnyBuffer tab_pw,
-    ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, double dt, double L, int32_t law,
-    double h, double tol, int32_t rot, ffi::Result<ffi::AnyBuffer> force,
-    ffi::Result<ffi::AnyBuffer> torque, ffi::Result<ffi::AnyBuffer> nspring,
-    ffi::Result<ffi::AnyBuffer> ovl_out, ffi::Result<ffi::AnyBuffer> dist_out,
-    ffi::Result<ffi::AnyBuffer> fn_out, ffi::Result<ffi::AnyBuffer> nwspring,
-    ffi::Result<ffi::AnyBuffer> wovl_out, ffi::Result<ffi::AnyBuffer> wfn_out,
-    ffi::Result<ffi::AnyBuffer> max_ratio, ffi::ResultBuffer<ffi::F64> heat) {
+    ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, ffi::AnyBuffer wdist0, double dt,
+    double L, int32_t law, double h, double tol, int32_t rot, int32_t fh,
+    ffi::Result<ffi::AnyBuffer> force, ffi::Result<ffi::AnyBuffer> torque,
+    ffi::Result<ffi::AnyBuffer> nspring, ffi::Result<ffi::AnyBuffer> ovl_out,
+    ffi::Result<ffi::AnyBuffer> dist_out, ffi::Result<ffi::AnyBuffer> fn_out,
+    ffi::Result<ffi::AnyBuffer> nwspring, ffi::Result<ffi::AnyBuffer> wovl_out,
+    ffi::Result<ffi::AnyBuffer> wfn_out, ffi::Result<ffi::AnyBuffer> max_ratio,
+    ffi::ResultBuffer<ffi::F64> heat, ffi::Result<ffi::AnyBuffer> pair_rows,
+    ffi::Result<ffi::AnyBuffer> wall_rows, ffi::ResultBuffer<ffi::F64> rates) {
   const ffi::DataType et = pos.element_type();
   if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
     return ffi::Error::InvalidArgument("drumheat_contacts: positions must be f32 or f64");
   for (const ffi::AnyBuffer* b : {&vel, &omg, &rad, &mass, &inertia, &spring, &wdist, &wnrm,
-                                  &wvel, &wspring, &tab_pp, &tab_pw, &wall_omega})
+                                  &wvel, &wspring, &tab_pp, &tab_pw, &wall_omega, &wdist0})
     if (b->element_type() != et)
       return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
   for (ffi::Result<ffi::AnyBuffer>* b : {&force, &torque, &nspring, &ovl_out, &dist_out,
                                                &fn_out, &nwspring, &wovl_out, &wfn_out,
-                                               &max_ratio})
+                                               &max_ratio, &pair_rows, &wall_rows})
     if ((*b)->element_type() != et)
       return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
   const auto pd = pos.dimensions();
@@ -457,17 +687,24 @@ static ffi::Error ContactsImpl(
   a.sp = spring.untyped_data(); a.wd = wdist.untyped_data(); a.wn = wnrm.untyped_data();
   a.wv = wvel.untyped_data(); a.ws = wspring.untyped_data(); a.tpp = tab_pp.untyped_data();
   a.tpw = tab_pw.untyped_data(); a.wom = wall_omega.untyped_data();
+  a.wd0 = wdist0.untyped_data();
   a.pt = ptype.typed_data(); a.P = pairs.typed_data(); a.temp = temp.typed_data();
   a.F = force->untyped_data(); a.T = torque->untyped_data(); a.S = nspring->untyped_data();
   a.OV = ovl_out->untyped_data(); a.DI = dist_out->untyped_data();
   a.FN = fn_out->untyped_data(); a.WS = nwspring->untyped_data();
   a.WO = wovl_out->untyped_data(); a.WF = wfn_out->untyped_data();
   a.MX = max_ratio->untyped_data(); a.Q = heat->typed_data();
+  a.PW = pair_rows->untyped_data(); a.WW = wall_rows->untyped_data(); a.R = rates->typed_data();
   a.n = pd[0];
   a.m = pairs.dimensions()[1];
   a.nw = wdist.dimensions().size() > 1 ? wdist.dimensions()[1] : 0;
   a.nt = tab_pp.dimensions()[1];
-  a.dt = dt; a.L = L; a.h = h; a.tol = tol; a.law = law; a.rot = rot != 0;
+  a.dt = dt; a.L = L; a.h = h; a.tol = tol; a.law = law; a.rot = rot != 0; a.fh = fh != 0;
+  const int dw = dim == 3 ? 3 : 1;
+  if (a.fh && (static_cast<int64_t>(pair_rows->element_count()) != a.m * (3*dim + dw + 1) ||
+               static_cast<int64_t>(wall_rows->element_count()) != a.n * a.nw * (2*dim + dw + 1) ||
+               static_cast<int64_t>(wdist0.element_count()) != a.n * a.nw))
+    return ffi::Error::InvalidArgument("drumheat_contacts: friction heat rows of wrong size");
   const bool f64 = et == ffi::DataType::F64;
   if (dim == 3) {
     if (f64) run<double, 3>(pool, a); else run<float, 3>(pool, a);
@@ -487,10 +724,62 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::AnyBuffer>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
-        .Arg<ffi::Buffer<ffi::F64>>()
+        .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::AnyBuffer>()
         .Attr<double>("dt").Attr<double>("L").Attr<int32_t>("law").Attr<double>("h")
-        .Attr<double>("tol").Attr<int32_t>("rot")
+        .Attr<double>("tol").Attr<int32_t>("rot").Attr<int32_t>("fh")
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
-        .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>());
+        .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>()
+        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>());
+
+// The friction heat's second pass (ContactHeat; see the header).
+static ffi::Error ContactHeatImpl(
+    ffi::ThreadPool pool, ffi::AnyBuffer vel, ffi::AnyBuffer omg, ffi::Buffer<ffi::S32> pairs,
+    ffi::AnyBuffer pair_rows, ffi::AnyBuffer wall_rows, ffi::AnyBuffer wvel,
+    ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> cond, double dt, double kw,
+    ffi::ResultBuffer<ffi::F64> heat, ffi::ResultBuffer<ffi::F64> sums) {
+  const ffi::DataType et = vel.element_type();
+  if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
+    return ffi::Error::InvalidArgument("drumheat_contact_heat: velocities must be f32 or f64");
+  for (const ffi::AnyBuffer* b : {&omg, &pair_rows, &wall_rows, &wvel, &wall_omega})
+    if (b->element_type() != et)
+      return ffi::Error::InvalidArgument("drumheat_contact_heat: mixed float dtypes");
+  const auto vd = vel.dimensions();
+  if (vd.size() != 2 || (vd[1] != 2 && vd[1] != 3))
+    return ffi::Error::InvalidArgument("drumheat_contact_heat: velocities must be (N, 2) or "
+                                       "(N, 3)");
+  const int dim = static_cast<int>(vd[1]), dw = dim == 3 ? 3 : 1;
+  HeatCall a;
+  a.n = vd[0];
+  a.m = pairs.dimensions()[1];
+  a.nw = wall_omega.element_count();
+  if (static_cast<int64_t>(pair_rows.element_count()) != a.m * (3*dim + dw + 1) ||
+      static_cast<int64_t>(wall_rows.element_count()) != a.n * a.nw * (2*dim + dw + 1) ||
+      static_cast<int64_t>(wvel.element_count()) != a.n * a.nw * dim ||
+      (cond.element_count() != 0 && static_cast<int64_t>(cond.element_count()) != a.n))
+    return ffi::Error::InvalidArgument("drumheat_contact_heat: buffers of wrong size");
+  a.v = vel.untyped_data(); a.w = omg.untyped_data(); a.P = pairs.typed_data();
+  a.PW = pair_rows.untyped_data(); a.WW = wall_rows.untyped_data();
+  a.wv = wvel.untyped_data(); a.wom = wall_omega.untyped_data();
+  a.K = cond.element_count() ? cond.typed_data() : nullptr;
+  a.E = heat->typed_data(); a.SUM = sums->typed_data();
+  a.dt = dt; a.kw = kw;
+  const bool f64 = et == ffi::DataType::F64;
+  if (dim == 3) {
+    if (f64) heat_pass<double, 3>(pool, a); else heat_pass<float, 3>(pool, a);
+  } else {
+    if (f64) heat_pass<double, 2>(pool, a); else heat_pass<float, 2>(pool, a);
+  }
+  return ffi::Error::Success();
+}
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(
+    ContactHeat, ContactHeatImpl,
+    ffi::Ffi::Bind()
+        .Ctx<ffi::ThreadPool>()
+        .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
+        .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
+        .Arg<ffi::Buffer<ffi::F64>>()
+        .Attr<double>("dt").Attr<double>("kw")
+        .Ret<ffi::Buffer<ffi::F64>>().Ret<ffi::Buffer<ffi::F64>>());

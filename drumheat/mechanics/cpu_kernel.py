@@ -20,8 +20,17 @@ docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
 ``scripts/bench_vs_liggghts.py`` the whole step against LIGGGHTS).
 
 Scope: 2D (monolayer: x-y, spin about z) and 3D, float32 and float64 mechanics, any number of
-materials (per-type contact tables), rolling resistance, walls, pair conduction, optional
-periodic z; the CPU backend and single runs (not under ``vmap``, not differentiable).
+materials (per-type contact tables), rolling resistance, walls, pair conduction, friction
+heat, optional periodic z; the CPU backend and single runs (not under ``vmap``, not
+differentiable).
+
+Friction heat (:mod:`drumheat.mechanics.dissipation`): each contact's loss in a step needs the
+full-step velocities, known only after the forces of all contacts are summed and the second
+half-kick is done. With ``wall_distance_before`` :func:`contacts` also writes one row per contact
+(force, levers, rolling torque, change of its spring energy) and sums the loss rates by source;
+:func:`contact_heat`, a second small pass at the full-step velocities, turns the rows into each
+contact's loss and splits it between the partners, as
+:func:`~drumheat.mechanics.dissipation.step_heat` does in JAX.
 :func:`check_supported` says why a configuration is refused (:func:`unsupported_reasons`
 without raising). The JAX kernel stays the reference and the path for GPUs, ensembles and
 everything else; ``tests/test_cpu_kernel.py`` holds the two equal to round-off.
@@ -53,10 +62,11 @@ import jax.numpy as jnp
 import numpy as np
 from drumheat.environment import cache_dir_setting
 
-__all__ = ["TARGET", "available", "check_supported", "contacts", "kernel_params", "load",
-           "unsupported_reasons"]
+__all__ = ["TARGET", "HEAT_TARGET", "available", "check_supported", "contacts", "contact_heat",
+           "kernel_params", "load", "unsupported_reasons"]
 
 TARGET = "drumheat_contacts"
+HEAT_TARGET = "drumheat_contact_heat"  # the friction heat's second pass
 SOURCE = Path(__file__).with_name("contact_kernel.cc")
 FLAGS = ("-O3", "-fno-math-errno", "-shared", "-fPIC", "-std=c++17", "-w")
 COMPILERS = ("g++", "c++", "clang++")
@@ -162,6 +172,8 @@ def _probe() -> tuple[bool, str]:
     try:
         lib = ctypes.cdll.LoadLibrary(str(out))
         jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(lib.Contacts), platform="cpu")
+        jax.ffi.register_ffi_target(HEAT_TARGET, jax.ffi.pycapsule(lib.ContactHeat),
+                                    platform="cpu")
     except (OSError, AttributeError) as e:
         return False, f"the compiled C++ contact kernel {out} cannot be loaded ({e})"
     _REGISTERED = str(out)
@@ -196,14 +208,9 @@ def load() -> str:
     return TARGET
 
 
-def unsupported_reasons(dim, params, dtype, batch_axis, friction_heat: bool = False) -> list[str]:
-    """Why ``pair_kernel="cpu"`` cannot serve this configuration (empty: it can);
-    ``friction_heat``: the contacts' losses are wanted as heat
-    (:mod:`drumheat.mechanics.dissipation`)."""
+def unsupported_reasons(dim, params, dtype, batch_axis) -> list[str]:
+    """Why ``pair_kernel="cpu"`` cannot serve this configuration (empty: it can)."""
     reasons = []
-    if friction_heat:
-        reasons.append("it does not compute the contacts' losses for friction heat "
-                       "([heat.friction])")
     if dim not in (2, 3):
         reasons.append(f"it is written for 2D and 3D, not dim = {dim}")
     if jnp.dtype(dtype) not in (jnp.float32, jnp.float64):
@@ -216,9 +223,9 @@ def unsupported_reasons(dim, params, dtype, batch_axis, friction_heat: bool = Fa
     return reasons
 
 
-def check_supported(dim, params, dtype, batch_axis, friction_heat: bool = False) -> None:
+def check_supported(dim, params, dtype, batch_axis) -> None:
     """Raise ValueError naming every reason why ``pair_kernel="cpu"`` cannot serve."""
-    reasons = unsupported_reasons(dim, params, dtype, batch_axis, friction_heat)
+    reasons = unsupported_reasons(dim, params, dtype, batch_axis)
     if reasons:
         raise ValueError("pair_kernel='cpu' cannot be used: " + "; ".join(reasons)
                          + ". Use pair_kernel='jax'.")
@@ -243,10 +250,17 @@ def kernel_params(params, n_walls, dtype, dt, wall_omega, periodic_length=None,
                 dt=float(dt), periodic_length=periodic_length, rotation=bool(rotation))
 
 
+def _rows(dim: int) -> tuple[int, int]:
+    """Columns of the friction-heat rows of a pair and of a wall slot (contact_kernel.cc):
+    force, the two levers (one at a wall), rolling torque and the change of spring energy."""
+    dw = 3 if dim == 3 else 1
+    return 3 * dim + dw + 1, 2 * dim + dw + 1
+
+
 def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_distance,
              wall_normal, wall_velocity, wall_spring, *, tables_pp, tables_pw, wall_omega, dt,
              periodic_length=None, rotation=True, temperature=None, conduction_law=None,
-             conduction_h=0.0, gap_tolerance=0.0):
+             conduction_h=0.0, gap_tolerance=0.0, wall_distance_before=None):
     """Particle-particle and particle-wall contact forces in one C++ loop.
 
     The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
@@ -267,14 +281,20 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         ``"overlap"``, :mod:`drumheat.mechanics.conduction`), the heat flow through the
         conducting pairs (overlapping, or with a gap of at most ``gap_tolerance`` times the
         smaller diameter) at the temperatures (N,) float64 is summed in the same loop.
+      wall_distance_before: friction heat (:mod:`drumheat.mechanics.dissipation`): the walls'
+        distance (N, W) at the positions before the step's drift ``pos - dt vel`` and time
+        ``t - dt``; with it the loop also returns what :func:`contact_heat` needs.
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
-    wall_overlap, wall_normal_force, max_overlap, heat)``: contact forces (N, D) and torques
-    (N, 3) or (N,) on the particles (torques zero without ``rotation``); per pair the new
-    springs (M, D), overlap, centre distance and normal force (M); per wall slot the new springs
-    (N, W, D), overlap and normal force (N, W); all zero where nothing touches; the largest
-    overlap / radius (the smaller radius of a pair) (1,); and the heat flow into each particle
-    (N,) float64, W (length 0 without a conduction law).
+    wall_overlap, wall_normal_force, max_overlap, heat, pair_rows, wall_rows, rates)``: contact
+    forces (N, D) and torques (N, 3) or (N,) on the particles (torques zero without
+    ``rotation``); per pair the new springs (M, D), overlap, centre distance and normal force
+    (M); per wall slot the new springs (N, W, D), overlap and normal force (N, W); all zero
+    where nothing touches; the largest overlap / radius (the smaller radius of a pair) (1,);
+    the heat flow into each particle (N,) float64, W (length 0 without a conduction law); with
+    ``wall_distance_before`` (else length 0) each contact's friction-heat row (pairs (M, K_p),
+    wall slots (N W, K_w): force on B, levers, rolling torque, ``U_new - U_old``) and the
+    step's losses at the continuous rates (3,) float64, J: damping, sliding, rolling.
     """
     target = load()
     dtype = jnp.dtype(pos.dtype)
@@ -295,13 +315,43 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
 
         law = LAWS.index(conduction_law)
     outs.append(sd((temperature.shape[0],), jnp.float64))
+    fh = wall_distance_before is not None
+    kp, kw = _rows(dim)
+    outs += [sd((m, kp) if fh else (0,), dtype), sd((n * nw, kw) if fh else (0,), dtype),
+             sd((3,), jnp.float64)]
+    wd0 = wall_distance_before if fh else jnp.zeros((0,))
     c = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
     # springs updated in place: input 8 -> output 2 (pairs), input 12 -> output 6 (walls)
     return jax.ffi.ffi_call(target, outs, input_output_aliases={8: 2, 12: 6})(
         c(pos), c(vel), c(omega).reshape(wshape), c(radius), c(mass), c(inertia),
         jnp.asarray(ptype).astype(jnp.int32), idx.astype(jnp.int32), c(spring),
         c(wall_distance), c(wall_normal), c(wall_velocity), c(wall_spring), c(tables_pp),
-        c(tables_pw), c(wall_omega), temperature.astype(jnp.float64),
+        c(tables_pw), c(wall_omega), temperature.astype(jnp.float64), c(wd0),
         dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
         h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
-        rot=np.int32(bool(rotation)))
+        rot=np.int32(bool(rotation)), fh=np.int32(fh))
+
+
+def contact_heat(vel, omega, idx, pair_rows, wall_rows, wall_velocity, wall_omega, dt,
+                 conductivity=None, wall_conductivity=0.0):
+    """Friction heat, the second pass: each contact's loss
+    ``D = -dt (F . u + M_r . w_rel) - (U_new - U_old)`` at the full-step velocities ``vel``
+    (N, D) and spins ``omega`` from the rows of :func:`contacts` (``pair_rows``, ``wall_rows``;
+    ``wall_velocity`` (N, W, D) and ``wall_omega`` (W,) as given to it), split between the
+    partners: ``k_A / (k_A + k_B)`` with the particles' ``conductivity`` (N,) and the walls'
+    ``wall_conductivity``, or half and half (``conductivity`` None), as
+    :func:`drumheat.mechanics.dissipation.step_heat` does.
+
+    Returns ``(particle, sums)``: the heat into each particle (N,) and ``(walls, all)`` (2,),
+    J, float64.
+    """
+    dtype = jnp.dtype(vel.dtype)
+    n, dim = vel.shape
+    c = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
+    k = (jnp.zeros((0,), jnp.float64) if conductivity is None
+         else jnp.asarray(conductivity, jnp.float64))
+    sd = jax.ShapeDtypeStruct
+    return jax.ffi.ffi_call(HEAT_TARGET, [sd((n,), jnp.float64), sd((2,), jnp.float64)])(
+        vel, c(omega).reshape((n, 3) if dim == 3 else (n,)), idx.astype(jnp.int32),
+        pair_rows, wall_rows, c(wall_velocity), c(wall_omega), k,
+        dt=np.float64(dt), kw=np.float64(wall_conductivity))

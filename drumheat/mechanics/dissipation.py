@@ -51,6 +51,11 @@ on the interface of two bodies touching over the same circle: with one interface
 factor. Between particles of one material, the usual drum, both rules give half and half. A
 wall's share leaves the particles into the wall and is booked on its own account.
 
+The C++ contact loop computes the same ``D``, rates and split
+(:mod:`drumheat.mechanics.cpu_kernel`: its contact rows and
+:func:`~drumheat.mechanics.cpu_kernel.contact_heat`, a second pass after the second half-kick;
+tests/test_friction_heat.py holds the two equal to round-off).
+
 :class:`Dissipation` (one step's heat per particle, into the walls, per source) reaches the
 step's ``extra_update`` in ``Contacts.dissipation`` (:mod:`drumheat.motion.coupling` adds it to
 the temperatures). Sums are float64 whatever the mechanics' float type.

@@ -11,8 +11,10 @@ per-step conduction, the heat flows). Two implementations of the same contact la
 - :class:`CpuContactForces`: pairs and walls in one C++ loop on XLA's CPU threads
   (:mod:`drumheat.mechanics.cpu_kernel`), the wall geometry from JAX.
 
-They are tested equal to round-off (tests/test_cpu_kernel.py). The velocity-Verlet step of
-:func:`drumheat.mechanics.make_dem` calls one of them once per step.
+They are tested equal to round-off (tests/test_cpu_kernel.py; the friction heat in
+tests/test_friction_heat.py). The velocity-Verlet step of :func:`drumheat.mechanics.make_dem`
+calls one of them once per step and, with friction heat, its :meth:`~ContactForces.dissipation`
+after the second half-kick.
 """
 
 from __future__ import annotations
@@ -34,10 +36,10 @@ from drumheat.mechanics.contact_forces import (
     rolling_loss,
     rolling_torque,
 )
-from drumheat.mechanics.dissipation import ContactWork, Dissipation, FrictionHeat
+from drumheat.mechanics.dissipation import ContactWork, Dissipation, FrictionHeat, step_heat
 
 __all__ = ["Contacts", "ForceResult", "ContactForces", "JaxContactForces", "CpuContactForces",
-           "make_contact_forces"]
+           "KernelWork", "make_contact_forces"]
 
 
 class Contacts(NamedTuple):
@@ -76,6 +78,20 @@ class Contacts(NamedTuple):
     dissipation: Optional[Dissipation] = None
 
 
+class KernelWork(NamedTuple):
+    """What the C++ loop leaves for the friction heat's second pass
+    (:func:`drumheat.mechanics.cpu_kernel.contact_heat`): the neighbour pairs ``idx`` (2, M),
+    each contact's row (``pair_rows`` (M, K_p), ``wall_rows`` (N W, K_w): force, levers,
+    rolling torque, change of spring energy), the wall velocities (N, W, dim) of the step and
+    its losses at the continuous rates ``rates`` (3,) float64, J (damping, sliding, rolling)."""
+
+    idx: jax.Array
+    pair_rows: jax.Array
+    wall_rows: jax.Array
+    wall_velocity: jax.Array
+    rates: jax.Array
+
+
 class ForceResult(NamedTuple):
     """What :class:`ContactForces` returns for one step.
 
@@ -83,7 +99,7 @@ class ForceResult(NamedTuple):
     (capacity, dim) and wall_spring (N, W, dim) m: the updated tangential springs; contacts:
     :class:`Contacts`; max_overlap: largest overlap / smaller radius of the step; heat (N,) W:
     the per-step pair conduction (None without it); work: with friction heat, what the
-    contacts leave for :func:`~drumheat.mechanics.dissipation.step_heat` (None without it).
+    contacts leave for :meth:`ContactForces.dissipation` (None without it).
     """
 
     force: jax.Array
@@ -93,7 +109,7 @@ class ForceResult(NamedTuple):
     contacts: Contacts
     max_overlap: jax.Array
     heat: Optional[jax.Array]
-    work: Optional[ContactWork] = None
+    work: Optional[ContactWork | KernelWork] = None
 
 
 def _materialize(tree, pred):
@@ -161,6 +177,11 @@ class ContactForces:
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
                   temperature) -> ForceResult:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def dissipation(self, work, vel, w) -> Dissipation:  # pragma: no cover - abstract
+        """The heat of the step (friction heat) from the ``work`` of :class:`ForceResult` at the
+        full-step velocities ``vel`` and spins ``w`` (after the second half-kick)."""
         raise NotImplementedError
 
     # -- shared parts --------------------------------------------------------------------------
@@ -279,6 +300,10 @@ class JaxContactForces(ContactForces):
                                   c.coefficient, c.gap_tolerance, pair_dist)
         return ForceResult(force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat,
                            work)
+
+    def dissipation(self, work: ContactWork, vel, w) -> Dissipation:
+        """The step's heat (:func:`~drumheat.mechanics.dissipation.step_heat`)."""
+        return step_heat(self.friction_heat, work, vel, w, self.dt)
 
     def _pairs(self, pos, vel, w, nbrs, pair_spring, force, torque, i, j):
         n, dim, params, table = self.n, self.dim, self.params, self.table
@@ -431,8 +456,7 @@ class CpuContactForces(ContactForces):
         super().__init__(*args, **kw)
         import drumheat.mechanics.cpu_kernel as cpu_kernel
 
-        cpu_kernel.check_supported(self.dim, self.params, self.dtype, batch_axis,
-                                   self.friction_heat is not None)
+        cpu_kernel.check_supported(self.dim, self.params, self.dtype, batch_axis)
         cpu_kernel.load()
         self._kernel = cpu_kernel
         # the C++ kernel's contact tables, wall spins, dt, period and rotation flag
@@ -449,10 +473,13 @@ class CpuContactForces(ContactForces):
         if c is not None and temperature is not None:
             heat_args = dict(temperature=temperature, conduction_law=c.law,
                              conduction_h=c.coefficient, gap_tolerance=c.gap_tolerance)
-        (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx,
-         heat) = self._kernel.contacts(pos, vel, w, self.radius, self.mass, self.inertia,
-                                       self.ptype, nbrs.idx, pair_spring, wd, wn, wv,
-                                       wall_spring, **self._kernel_params, **heat_args)
+        if self.friction_heat is not None:  # the walls before the step, as JaxContactForces
+            heat_args["wall_distance_before"] = self.wall_geometry(pos - self.dt_c * vel,
+                                                                   t - self.dt)[0]
+        (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, pair_rows,
+         wall_rows, rates) = self._kernel.contacts(
+            pos, vel, w, self.radius, self.mass, self.inertia, self.ptype, nbrs.idx,
+            pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args)
         active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
         p_cond = active
@@ -465,8 +492,22 @@ class CpuContactForces(ContactForces):
             wall_conducts=self.wall_gap_mask(wd, w_mask))
         if c is None or temperature is None:
             heat = None
+        work = None
+        if self.friction_heat is not None:
+            work = KernelWork(nbrs.idx, pair_rows, wall_rows, wv, rates)
         return ForceResult(force + fk, torque + tk, new_spring, new_wall_spring, contacts,
-                           mx[0], heat)
+                           mx[0], heat, work)
+
+    def dissipation(self, work: KernelWork, vel, w) -> Dissipation:
+        """The step's heat from the C++ loop's rows (its second pass,
+        :func:`~drumheat.mechanics.cpu_kernel.contact_heat`), as
+        :func:`~drumheat.mechanics.dissipation.step_heat` computes it in JAX."""
+        fh = self.friction_heat
+        particle, sums = self._kernel.contact_heat(
+            vel, w, work.idx, work.pair_rows, work.wall_rows, work.wall_velocity,
+            self._kernel_params["wall_omega"], self.dt, fh.conductivity, fh.wall_conductivity)
+        by_source = jnp.concatenate([work.rates, (sums[1] - jnp.sum(work.rates))[None]])
+        return Dissipation(particle, sums[0], by_source)
 
 
 def make_contact_forces(backend: str, particles, walls, params: ContactParams, *,

@@ -58,7 +58,7 @@ import numpy as np
 from drumheat.geometry.walls import expand_walls, wall_bounds
 from drumheat.mechanics.contact_forces import ContactParams, critical_time_step
 from drumheat.mechanics.conduction import PairConduction
-from drumheat.mechanics.dissipation import FrictionHeat, boundary_energy, step_heat
+from drumheat.mechanics.dissipation import FrictionHeat, boundary_energy
 from drumheat.mechanics.errors import (
     NeighborListError,
     NonFiniteError,
@@ -521,8 +521,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         if rotation:
             w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
         if work is not None:  # friction heat: the contacts' losses at the full-step velocities
-            contacts = contacts._replace(
-                dissipation=step_heat(forces.friction_heat, work, v, w, dt))
+            contacts = contacts._replace(dissipation=forces.dissipation(work, v, w))
         new = DEMState(position=x, velocity=v, angular_velocity=w, force=f, torque=tq, time=t,
                        step=state.step + 1, nbrs=nbrs, pair_spring=spring, wall_spring=wspring,
                        n_rebuilds=count, max_overlap=jnp.maximum(state.max_overlap, ovl),
@@ -728,7 +727,8 @@ def make_dem(
         the particle-particle and particle-wall contacts (and the conduction) in one C++ loop
         on XLA's CPU threads, called through ``jax.ffi`` (:mod:`drumheat.mechanics.cpu_kernel`;
         the DEM step 2.3-5.9x faster on CPU, docs/performance.md; 2D and 3D, float32 and
-        float64, any materials, rolling resistance; single runs, not under vmap; compiled with
+        float64, any materials, rolling resistance, friction heat; single runs, not under vmap;
+        compiled with
         g++ on first use, ``cpu_kernel.available()`` says whether it can be). Same contact law;
         results agree with ``"jax"`` to round-off.
       conduction: :class:`~drumheat.mechanics.conduction.PairConduction`: heat conduction
@@ -744,7 +744,8 @@ def make_dem(
       friction_heat: :class:`~drumheat.mechanics.dissipation.FrictionHeat`: every step's
         contact losses (damping, sliding, rolling) as heat, split between the partners of each
         contact; the step's ``Contacts.dissipation`` carries it to ``extra_update``
-        (:mod:`drumheat.mechanics.dissipation`). JAX kernel only.
+        (:mod:`drumheat.mechanics.dissipation`). Both kernels (the C++ loop in a second pass
+        after the second half-kick, :func:`~drumheat.mechanics.cpu_kernel.contact_heat`).
     """
     gap_pp, gap_pw = (float(g) for g in conduction_gap)
     if not (0.0 <= gap_pp < 0.5 and 0.0 <= gap_pw < 0.5):

@@ -49,15 +49,14 @@ class DEMMotion(AbstractMotion):
         """The contact kernel of this scene's DEM (``[dem] contact_backend``,
         :func:`drumheat.mechanics.backend.choose_contact_backend`); chosen once for single
         runs (one warning line at most), always JAX under ``vmap``."""
-        friction = self.scene.heat.friction is not None
         if batched:
             return choose_contact_backend(self.scene.dem.contact_backend, dim=self.scene.dim,
                                           params=self.params, dtype=self.dtype, batched=True,
-                                          warn=False, friction_heat=friction)
+                                          warn=False)
         if self._backend is None:
             self._backend = choose_contact_backend(self.scene.dem.contact_backend,
                                                    dim=self.scene.dim, params=self.params,
-                                                   dtype=self.dtype, friction_heat=friction)
+                                                   dtype=self.dtype)
         return self._backend
 
     def backend_info(self) -> dict:
