@@ -105,6 +105,33 @@ def test_neighbour_overflow_is_reallocated_and_redone():
     assert bool(raw.nbrs.did_buffer_overflow)
 
 
+def test_donated_chunks_run_the_same(monkeypatch):
+    """run()'s accelerator path (each chunk donates its start state, which is kept on the host
+    for a redo), forced on the CPU: the same trajectory bit for bit as the plain path, through
+    an overflow and its redo; the caller's state and the states given to a callback stay
+    usable."""
+    import drumheat.mechanics.integrator as integrator
+
+    dem = _drum2d()
+    tiny = dem.init(_drum2d_positions(40, spacing=2.6), pair_capacity=1)
+    n = int(0.2 / dem.dt)
+    ref = dem.run(tiny, n, chunk=n // 4)
+    monkeypatch.setattr(integrator, "_on_accelerator", lambda state: True)
+    out = dem.run(tiny, n, chunk=n // 4)
+    assert not tiny.position.is_deleted() and not tiny.nbrs.idx.is_deleted()
+    assert out.nbrs.idx.shape == ref.nbrs.idx.shape
+    for a, b in zip(jax.tree_util.tree_leaves(ref), jax.tree_util.tree_leaves(out)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    seen = []
+    dem.run(out, 3 * 200, chunk=200, callback=seen.append)
+    assert len(seen) == 3 and not any(s.position.is_deleted() for s in seen)
+    # an error after a donated chunk still carries the chunk's start (from the host copy)
+    bad = out._replace(velocity=out.velocity.at[0, 0].set(jnp.nan))
+    with pytest.raises(NonFiniteError) as err:
+        dem.run(bad, 400, chunk=200)
+    assert int(err.value.state.step) == int(out.step)
+
+
 def test_escape_nan_and_overlap_stop_the_run(settled_2d):
     dem, s0 = settled_2d
     # a particle outside the drum (inserted there, or tunnelled out): detected after the

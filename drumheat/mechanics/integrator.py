@@ -169,8 +169,17 @@ def wrap_periodic_axis(pos, periodic_length, near: bool = False):
     return jnp.where(last & (pos >= L), pos - L, jnp.where(last & (pos < 0), pos + L, pos))
 
 
-def _jit(fun):
-    return jax.jit(fun, compiler_options=JIT_OPTIONS)
+def _jit(fun, donate: bool = False):
+    """``jax.jit`` with :data:`JIT_OPTIONS`; ``donate``: the first argument's buffers are
+    donated (the outputs may reuse them in place)."""
+    return jax.jit(fun, compiler_options=JIT_OPTIONS, donate_argnums=(0,) if donate else ())
+
+
+def _on_accelerator(state) -> bool:
+    """Whether the state's arrays live on an accelerator (not XLA's CPU backend)."""
+    leaf = jax.tree_util.tree_leaves(state)[0]
+    devices = getattr(leaf, "devices", None)
+    return devices is not None and any(d.platform != "cpu" for d in devices())
 
 
 class PairCarried(eqx.Module):
@@ -255,6 +264,7 @@ class DEM:
     _run_steps: Callable
     _diag: Callable
     _energies: Callable
+    _run_chunk: Optional[Callable] = None
     default_chunk: int = 1000
     cell_capacity: int = 0
     _external: Optional[Callable] = None
@@ -344,7 +354,8 @@ class DEM:
             raise NeighborListError(
                 f"neighbour list still overflows after reallocation (pairs {count}, capacity "
                 f"{target}, cell capacity {new.cell_list_capacity})", state)
-        remap = lambda a: remap_pair_data(state.nbrs.idx, a, new.idx, n)  # noqa: E731
+        remap = lambda a: remap_pair_data(  # noqa: E731
+            state.nbrs.idx, a, new.idx, n, old_sorted=True)
         pdata = pair_extra(state.extra)
         extra = state.extra if pdata is None else state.extra.with_pair_arrays(
             jax.tree_util.tree_map(remap, pdata))
@@ -360,14 +371,29 @@ class DEM:
         outside the domain :class:`ParticleEscapeError`, an overlap above ``max_overlap`` x the
         smaller radius :class:`OverlapError`; each carries the last good state
         (``err.state``). ``callback(state)`` is called after each accepted chunk.
+
+        On an accelerator (not the CPU backend) each chunk updates its start state in place
+        (buffer donation: one copy of the state on the device instead of two), and the start
+        is kept on the host for a redo or an error; ``state`` itself and the states given to
+        ``callback`` are never donated (a device copy is made of them). On the CPU the chunk's
+        start stays where it is: a host copy would cost the same memory.
         """
         chunk = int(chunk or self.default_chunk)
+        donate = _on_accelerator(state)
+        owned = False  # whether `state`'s buffers are this loop's own (not the caller's)
         done = 0
         while done < n_steps:
             k = min(chunk, n_steps - done)
             start = state._replace(max_overlap=jnp.zeros_like(state.max_overlap))
+            if donate and not owned:
+                start = jax.tree_util.tree_map(jnp.copy, start)
+            good = state
             for attempt in range(max_reallocations + 1):
-                new = self._run_steps(start, jnp.asarray(k, jnp.int32))
+                new, start = self._chunk(start, k, donate)
+                if start is None:  # donated, and the chunk passed its checks
+                    break
+                if donate:  # `state` went into the chunk: the start came back from the host
+                    good = start
                 redo = self.check_chunk(start, new, attempt)
                 if redo is None:
                     break
@@ -375,12 +401,32 @@ class DEM:
             else:
                 raise NeighborListError(
                     f"neighbour list overflowed {max_reallocations + 1} times in a row at step "
-                    f"{int(state.step)}; the packing may be exploding", state)
+                    f"{int(good.step)}; the packing may be exploding", good)
             state = new
+            owned = callback is None
             done += k
             if callback is not None:
                 callback(state)
         return state
+
+    def _chunk(self, start: DEMState, k: int, donate: bool):
+        """``(new, start)``: ``k`` steps from ``start``. With ``donate`` the chunk updates
+        ``start``'s buffers in place; the start comes back (from a host copy) only when the
+        chunk fails a check (:meth:`check_chunk` then decides), else None."""
+        n = jnp.asarray(k, jnp.int32)
+        if not donate:
+            return self._run_steps(start, n), start
+        held = jax.device_get(start)
+        new = self._run_chunk(start, n)
+        d = jax.device_get(self._diag(new))
+        if not d["overflow"] and self._passes(d):
+            return new, None
+        return new, jax.device_put(held)
+
+    def _passes(self, d) -> bool:
+        """Whether the diagnostics ``d`` of a chunk pass the checks of :meth:`_check`."""
+        return bool(d["finite"]) and int(d["n_out"]) == 0 and \
+            float(d["max_overlap"]) <= self.max_overlap
 
     def check_chunk(self, start: DEMState, new: DEMState, attempt: int = 0):
         """Host-side check of a chunk run from ``start`` to ``new``.
@@ -473,7 +519,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     def rebuild(args):
         pos, nbrs, spring, count, pdata = args
         new = neighbor.rebuild(pos, nbrs)
-        remap = lambda a: remap_pair_data(nbrs.idx, a, new.idx, n)  # noqa: E731
+        remap = lambda a: remap_pair_data(nbrs.idx, a, new.idx, n, old_sorted=True)  # noqa: E731
         return new, remap(spring), count + 1, jax.tree_util.tree_map(remap, pdata)
 
     def keep(args):
@@ -802,6 +848,7 @@ def make_dem(
         particles=particles, params=params, neighbor=neighbor, dtype=dtype, gravity=gravity,
         max_overlap=float(max_overlap), domain_lo=dom_lo, domain_hi=dom_hi,
         _forces=_jit(forces), _step=_jit(step), _run_steps=_jit(run_steps), _diag=diag,
-        _energies=_jit(energies), default_chunk=int(chunk), conduction=conduction,
+        _energies=_jit(energies), _run_chunk=_jit(run_steps, donate=True),
+        default_chunk=int(chunk), conduction=conduction,
         cell_capacity=cell_cap, _external=external_force, step_fn=step, run_steps_fn=run_steps,
     )

@@ -30,8 +30,8 @@ codes of ``jax_md.partition.NeighborList``, so code written for jax-md's lists r
 * Pair order: after every build the pairs are sorted by ``(i, j)`` (:func:`sort_pairs`), so
   force sums do not depend on when the list was built.
 * History across rebuilds: after a rebuild, :func:`remap_pair_data` finds every new pair in the
-  old pair list (sort + binary search on the key ``i (N+1) + j``) and carries its data over;
-  new pairs start with zero history.
+  old pair list (a binary search on ``(i, j)`` in the sorted old list, int32) and carries its
+  data over; new pairs start with zero history.
 """
 
 from __future__ import annotations
@@ -95,25 +95,52 @@ def pair_keys(idx, n):
     return i * (n + 1) + j
 
 
-def remap_pair_data(old_idx, old_data, new_idx, n):
+def remap_pair_data(old_idx, old_data, new_idx, n, old_sorted: bool = False):
     """Carry per-pair data from an old pair list to a new one (pairs matched by identity).
 
     Args:
       old_idx, new_idx: OrderedSparse neighbour indices (2, M_old) and (2, M_new).
       old_data: array (M_old, ...) aligned with ``old_idx``.
       n: number of particles (padding value).
+      old_sorted: ``old_idx`` is in canonical order already (:func:`sort_pairs`; every list
+        the integrator holds is), which saves sorting it.
     Returns:
       array (M_new, ...): the old data of pairs present in both lists, zeros for new pairs
       and padding.
+
+    Each new pair is found in the old list by a binary search on ``(i, j)`` in lexicographic
+    order, in int32 (no int64 keys ``i (N+1) + j``: the temporaries are a few int32 per pair).
     """
-    ko = pair_keys(old_idx, n)
-    kn = pair_keys(new_idx, n)
-    order = jnp.argsort(ko)
-    ko_sorted = ko[order]
-    pos = jnp.searchsorted(ko_sorted, kn)
-    pos = jnp.clip(pos, 0, ko.shape[0] - 1)
-    found = (ko_sorted[pos] == kn) & (new_idx[0] < n)
-    src = order[pos]
+    m_old = old_idx.shape[1]
+    order = None
+    if not old_sorted:
+        oi, oj, order = jax.lax.sort((old_idx[0], old_idx[1],
+                                      jnp.arange(m_old, dtype=jnp.int32)), num_keys=2)
+        old_idx = jnp.stack([oi, oj])
+    ni, nj = new_idx[0], new_idx[1]
+
+    def below(k):
+        """Whether old pair k (clipped to the list) comes before (ni, nj)."""
+        k = jnp.minimum(k, m_old - 1)
+        a, b = old_idx[0, k], old_idx[1, k]
+        return (a < ni) | ((a == ni) & (b < nj))
+
+    # branchless lower bound: pos = the number of old pairs before (ni, nj), built bit by bit
+    # from the highest power of two down (one int32 per pair carried); the first bit is
+    # taken outside the loop so that pos is computed from the pairs (a constant start would
+    # be allocated early and held through the neighbour build)
+    top = max(int(m_old).bit_length() - 1, 0)
+
+    def narrow(k, pos):
+        cand = pos + jnp.left_shift(jnp.int32(1), (top - 1 - k).astype(jnp.int32))
+        return jnp.where((cand <= m_old) & below(cand - 1), cand, pos)
+
+    first = jnp.int32(1 << top)
+    pos = jnp.where(below(first - 1), first, jnp.int32(0))
+    pos = jax.lax.fori_loop(0, top, narrow, pos)
+    pos = jnp.minimum(pos, m_old - 1)
+    found = (old_idx[0, pos] == ni) & (old_idx[1, pos] == nj) & (ni < n)
+    src = pos if order is None else order[pos]
     gathered = old_data[src]
     mask = found.reshape(found.shape + (1,) * (old_data.ndim - 1))
     return jnp.where(mask, gathered, 0)
@@ -129,10 +156,12 @@ def sort_pairs(nbrs, n):
     """
     import dataclasses
 
-    order = jnp.argsort(pair_keys(nbrs.idx, n))
-    # two row gathers stacked (not idx[:, order]): XLA:CPU then keeps idx row-major, the
-    # layout of the scan carry, instead of converting it back and forth every step
-    return dataclasses.replace(nbrs, idx=jnp.stack([nbrs.idx[0][order], nbrs.idx[1][order]]))
+    # a sort on the two int32 rows as keys (lexicographic (i, j), the order of the key
+    # i (N+1) + j with padding N last): no int64 keys or permutation; the rows stacked (not
+    # one sort of idx): XLA:CPU then keeps idx row-major, the layout of the scan carry
+    i, j = jax.lax.sort((nbrs.idx[0], nbrs.idx[1]), num_keys=2)
+    # the barrier makes every later use read the stacked rows, so the sorted ones die here
+    return dataclasses.replace(nbrs, idx=jax.lax.optimization_barrier(jnp.stack([i, j])))
 
 
 class PEC:
