@@ -24,9 +24,9 @@ else
 fi
 nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.sm,clocks.mem --format=csv
 python3 -c "import jax; print('jax', jax.__version__, jax.devices())"
-timeout 360 python3 scripts/bench_gpu.py --n 100000 1000000 --precision float32 float64 \
+timeout 330 python3 scripts/bench_gpu.py --n 100000 1000000 --precision float32 float64 \
   --seconds "$SECONDS_PER_CASE" --warm 200 --timeout 150 --json "$OUT/bench_gpu.jsonl" \
   2>&1 | tee "$OUT/bench_gpu.log"
-timeout 150 python3 -m pytest -q -x -p no:cacheprovider -o addopts="" -m "not slow" \
+timeout 120 python3 -m pytest -q -x -p no:cacheprovider -o addopts="" -m "not slow" \
   tests/test_friction_heat.py tests/test_drum_wall.py tests/test_coarse_grain.py \
   2>&1 | tee "$OUT/tests_gpu.log" | tail -15
