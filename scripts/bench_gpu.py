@@ -91,7 +91,8 @@ def mean_temperature(state) -> float:
     return float(jnp.mean(T)) if T is not None else float("nan")
 
 
-def measure(n: int, precision: str, base: Path, seconds: float, warm: int) -> dict:
+def measure(n: int, precision: str, base: Path, seconds: float, warm: int,
+            donate=None) -> dict:
     """In this process: build the scene at N, warm up, time; one dict of numbers."""
     import resource
     import tempfile
@@ -109,12 +110,12 @@ def measure(n: int, precision: str, base: Path, seconds: float, warm: int) -> di
     t_setup = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    state = dem.run(state, warm, chunk=warm)
+    state = dem.run(state, warm, chunk=warm, donate=donate)
     jax.block_until_ready(state.position)
     t_warm = time.perf_counter() - t0
     probe = max(50, warm // 2)  # a first estimate of the rate, compiled already
     t0 = time.perf_counter()
-    state = dem.run(state, probe, chunk=probe)
+    state = dem.run(state, probe, chunk=probe, donate=donate)
     jax.block_until_ready(state.position)
     per_step = (time.perf_counter() - t0) / probe
     steps = int(max(200, min(50000, seconds / per_step)))
@@ -122,7 +123,7 @@ def measure(n: int, precision: str, base: Path, seconds: float, warm: int) -> di
     T_before = mean_temperature(state)
     r0 = int(state.n_rebuilds)
     t0 = time.perf_counter()
-    out = dem.run(state, steps, chunk=probe)
+    out = dem.run(state, steps, chunk=probe, donate=donate)
     jax.block_until_ready(out.position)
     wall = time.perf_counter() - t0
     T_after = mean_temperature(out)
@@ -130,7 +131,7 @@ def measure(n: int, precision: str, base: Path, seconds: float, warm: int) -> di
     stats = dev.memory_stats() or {}
     peak = stats.get("peak_bytes_in_use")
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    return dict(n=n, precision=precision, device=f"{dev.platform}:{dev.device_kind}",
+    return dict(n=n, precision=precision, donate=str(donate), device=f"{dev.platform}:{dev.device_kind}",
                 jax=jax.__version__, steps=steps, wall_s=wall, rate=n * steps / wall,
                 rebuilds=int(out.n_rebuilds) - r0, setup_s=t_setup, warm_s=t_warm,
                 pair_capacity=int(out.nbrs.idx.shape[1]),
@@ -151,48 +152,54 @@ def main():
     ap.add_argument("--json", type=Path, help="append each result as a JSON line here")
     ap.add_argument("--timeout", type=float, default=600, help="per case (s)")
     ap.add_argument("--make-base", type=Path, metavar="FILE")
-    ap.add_argument("--one", nargs=2, metavar=("N", "PRECISION"), help=argparse.SUPPRESS)
+    ap.add_argument("--donate", nargs="+", default=["auto"], choices=["auto", "on", "off"],
+                    help="buffer donation of DEM.run's chunks (auto: on an accelerator); "
+                         "several values time each")
+    ap.add_argument("--one", nargs=3, metavar=("N", "PRECISION", "DONATE"),
+                    help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.make_base:
         make_base(args.make_base)
         return
     if args.one:
+        donate = {"auto": None, "on": True, "off": False}[args.one[2]]
         print("RESULT " + json.dumps(measure(int(args.one[0]), args.one[1], args.base,
-                                             args.seconds, args.warm)), flush=True)
+                                             args.seconds, args.warm, donate)), flush=True)
         return
     if not args.base.exists():
         make_base(args.base)
     env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false")
     rows = []
-    for prec in args.precision:
-        for n in args.n:
-            cmd = [sys.executable, __file__, "--one", str(n), prec, "--base", str(args.base),
-                   "--seconds", str(args.seconds), "--warm", str(args.warm)]
-            try:
-                p = subprocess.run(cmd, env=env, capture_output=True, text=True,
-                                   timeout=args.timeout)
-            except subprocess.TimeoutExpired:
-                print(f"N={n} {prec}: over {args.timeout:.0f} s, skipped", flush=True)
-                continue
-            res = [line[7:] for line in p.stdout.splitlines() if line.startswith("RESULT ")]
-            if not res:
-                print(f"N={n} {prec}: failed\n{p.stderr[-3000:]}", flush=True)
-                continue
-            r = json.loads(res[0])
-            rows.append(r)
-            if args.json:
-                with open(args.json, "a") as f:
-                    f.write(json.dumps(r) + "\n")
-            print(f"N={n} {prec}: {r['rate']:.3g} particle-steps/s "
-                  f"({r['steps']} steps in {r['wall_s']:.1f} s), "
-                  f"{r['bytes_per_particle'] / 1e3:.2f} kB/particle", flush=True)
+    cases = [(prec, n, don) for prec in args.precision for n in args.n for don in args.donate]
+    for prec, n, don in cases:
+        cmd = [sys.executable, __file__, "--one", str(n), prec, don, "--base",
+               str(args.base), "--seconds", str(args.seconds), "--warm", str(args.warm)]
+        try:
+            p = subprocess.run(cmd, env=env, capture_output=True, text=True,
+                               timeout=args.timeout)
+        except subprocess.TimeoutExpired:
+            print(f"N={n} {prec} donate {don}: over {args.timeout:.0f} s, skipped",
+                  flush=True)
+            continue
+        res = [line[7:] for line in p.stdout.splitlines() if line.startswith("RESULT ")]
+        if not res:
+            print(f"N={n} {prec} donate {don}: failed\n{p.stderr[-3000:]}", flush=True)
+            continue
+        r = json.loads(res[0])
+        rows.append(r)
+        if args.json:
+            with open(args.json, "a") as f:
+                f.write(json.dumps(r) + "\n")
+        print(f"N={n} {prec} donate {don}: {r['rate']:.3g} particle-steps/s "
+              f"({r['steps']} steps in {r['wall_s']:.1f} s), "
+              f"{r['bytes_per_particle'] / 1e3:.2f} kB/particle", flush=True)
     if not rows:
         return
     print(f"\ndevice {rows[0]['device']}, JAX {rows[0]['jax']}")
-    print(f"{'N':>9} {'precision':>9} {'p-steps/s':>10} {'steps':>6} {'wall s':>7} "
+    print(f"{'N':>9} {'precision':>9} {'donate':>6} {'p-steps/s':>10} {'steps':>6} {'wall s':>7} "
           f"{'rebuilds':>8} {'kB/part':>8} {'set-up s':>8} {'warm s':>7} {'dT_mean K':>10}")
     for r in rows:
-        print(f"{r['n']:>9} {r['precision']:>9} {r['rate']:>10.3g} {r['steps']:>6} "
+        print(f"{r['n']:>9} {r['precision']:>9} {r['donate']:>6} {r['rate']:>10.3g} {r['steps']:>6} "
               f"{r['wall_s']:>7.1f} {r['rebuilds']:>8} {r['bytes_per_particle'] / 1e3:>8.2f} "
               f"{r['setup_s']:>8.0f} {r['warm_s']:>7.0f} {r['dT_mean']:>10.3g}")
 
