@@ -92,7 +92,7 @@ def mean_temperature(state) -> float:
 
 
 def measure(n: int, precision: str, base: Path, seconds: float, warm: int,
-            donate=None) -> dict:
+            donate: bool = False) -> dict:
     """In this process: build the scene at N, warm up, time; one dict of numbers."""
     import resource
     import tempfile
@@ -152,9 +152,9 @@ def main():
     ap.add_argument("--json", type=Path, help="append each result as a JSON line here")
     ap.add_argument("--timeout", type=float, default=600, help="per case (s)")
     ap.add_argument("--make-base", type=Path, metavar="FILE")
-    ap.add_argument("--donate", nargs="+", default=["auto"], choices=["auto", "on", "off"],
-                    help="buffer donation of DEM.run's chunks (auto: on an accelerator); "
-                         "several values time each")
+    ap.add_argument("--donate", nargs="+", default=["off"], choices=["on", "off"],
+                    help="buffer donation of DEM.run's chunks (DEM.run(donate=...)); several "
+                         "values time each")
     ap.add_argument("--one", nargs=3, metavar=("N", "PRECISION", "DONATE"),
                     help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -162,7 +162,7 @@ def main():
         make_base(args.make_base)
         return
     if args.one:
-        donate = {"auto": None, "on": True, "off": False}[args.one[2]]
+        donate = args.one[2] == "on"
         print("RESULT " + json.dumps(measure(int(args.one[0]), args.one[1], args.base,
                                              args.seconds, args.warm, donate)), flush=True)
         return

@@ -105,30 +105,26 @@ def test_neighbour_overflow_is_reallocated_and_redone():
     assert bool(raw.nbrs.did_buffer_overflow)
 
 
-def test_donated_chunks_run_the_same(monkeypatch):
-    """run()'s accelerator path (each chunk donates its start state, which is kept on the host
-    for a redo), forced on the CPU: the same trajectory bit for bit as the plain path, through
-    an overflow and its redo; the caller's state and the states given to a callback stay
-    usable."""
-    import drumheat.mechanics.integrator as integrator
-
+def test_donated_chunks_run_the_same():
+    """run(donate=True) (each chunk donates its start state, which is kept on the host for a
+    redo): the same trajectory bit for bit as the plain path on the CPU, through an overflow and
+    its redo; the caller's state and the states given to a callback stay usable."""
     dem = _drum2d()
     tiny = dem.init(_drum2d_positions(40, spacing=2.6), pair_capacity=1)
     n = int(0.2 / dem.dt)
     ref = dem.run(tiny, n, chunk=n // 4)
-    monkeypatch.setattr(integrator, "_on_accelerator", lambda state: True)
-    out = dem.run(tiny, n, chunk=n // 4)
+    out = dem.run(tiny, n, chunk=n // 4, donate=True)
     assert not tiny.position.is_deleted() and not tiny.nbrs.idx.is_deleted()
     assert out.nbrs.idx.shape == ref.nbrs.idx.shape
     for a, b in zip(jax.tree_util.tree_leaves(ref), jax.tree_util.tree_leaves(out)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     seen = []
-    dem.run(out, 3 * 200, chunk=200, callback=seen.append)
+    dem.run(out, 3 * 200, chunk=200, callback=seen.append, donate=True)
     assert len(seen) == 3 and not any(s.position.is_deleted() for s in seen)
     # an error after a donated chunk still carries the chunk's start (from the host copy)
     bad = out._replace(velocity=out.velocity.at[0, 0].set(jnp.nan))
     with pytest.raises(NonFiniteError) as err:
-        dem.run(bad, 400, chunk=200)
+        dem.run(bad, 400, chunk=200, donate=True)
     assert int(err.value.state.step) == int(out.step)
 
 
