@@ -771,9 +771,8 @@ def make_dem(
         on XLA's CPU threads, called through ``jax.ffi`` (:mod:`drumheat.mechanics.cpu_kernel`;
         the DEM step 2.3-5.9x faster on CPU, docs/performance.md; 2D and 3D, float32 and
         float64, any materials, rolling resistance, friction heat; single runs, not under vmap;
-        compiled with
-        g++ on first use, ``cpu_kernel.available()`` says whether it can be). Same contact law;
-        results agree with ``"jax"`` to round-off.
+        compiled with g++ on first use, ``cpu_kernel.available()`` says whether it can be).
+        Same contact law; results agree with ``"jax"`` to round-off.
       conduction: :class:`~drumheat.mechanics.conduction.PairConduction`: heat conduction
         through the touching pairs every step (:mod:`drumheat.mechanics.conduction`); the
         state's ``extra`` is then the particle temperatures (N,), float64, advanced after the
