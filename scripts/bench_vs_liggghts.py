@@ -43,7 +43,8 @@ the LIGGGHTS packing as before. The step cost per particle is what is compared; 
 differ (LIGGGHTS 1e-5 s).
 
 Usage: python scripts/bench_vs_liggghts.py [--n 2000 10000 50000] [--steps S] [--quick]
-       [--ranks 1 2] [--workdir DIR] [--no-liggghts] [--thermal on|off] [--bespoke]
+       [--ranks 1 2] [--workdir DIR] [--packings DIR] [--no-liggghts] [--thermal on|off]
+       [--bespoke]
 """
 
 from __future__ import annotations
@@ -198,24 +199,44 @@ def time_drumheat(dat, steps, warm, thermal, pair_kernel="jax"):
     return dict(r, note=extra)
 
 
-def scene_for(n, backend="auto"):
+def scene_for(n, backend="auto", packing=None):
     """The built-in scene glass-drum-3d at N particles (its documented knob: depth = N x
-    2.6e-5 m), on the given contact backend."""
+    2.6e-5 m), on the given contact backend; ``packing``: a packing file (``packing.method =
+    "file"``) instead of the scene's pour."""
     from drumheat.scene import load_scene
 
-    return load_scene("glass-drum-3d", {"groups.0.count": n, "drum.depth": n * 2.6e-5,
-                                        "dem.contact_backend": backend})
+    over = {"groups.0.count": n, "drum.depth": n * 2.6e-5, "dem.contact_backend": backend}
+    if packing is not None:
+        over.update({"packing.method": "file", "packing.file": str(packing)})
+    return load_scene("glass-drum-3d", over)
 
 
-def time_scene(n, steps, warm, backend="auto"):
+def scene_packing(n, folder):
+    """The scene's poured bed at N in ``folder`` (``glass-drum-3d_N.npz``), poured and saved
+    there the first time (the pour is not what is timed; pouring 50 000 beads takes a while);
+    None without a folder."""
+    if folder is None:
+        return None
+    from drumheat.motion import make_motion
+
+    path = Path(folder) / f"glass-drum-3d_{n}.npz"
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pos = np.asarray(make_motion(scene_for(n, "auto")).packing_positions(), float)
+        np.savez(path, position=pos, diameter=np.full(n, D_P), group=np.zeros(n, int))
+    return path
+
+
+def time_scene(n, steps, warm, backend="auto", packing=None):
     """drumheat through the product path: the scene's motion model (``make_motion``), its
-    poured initial state and its DEM with the coupled heat update (contact times every step, a
-    thermal step every ``dem.thermal_substeps``), timed over ``steps`` after ``warm``."""
+    poured initial state (or the ``packing`` file) and its DEM with the coupled heat update
+    (contact times every step, a thermal step every ``dem.thermal_substeps``), timed over
+    ``steps`` after ``warm``."""
     from drumheat.motion import make_motion
 
     t0 = time.perf_counter()
-    motion = make_motion(scene_for(n, backend))
-    state = motion.initial_state()  # pours the bed (not timed)
+    motion = make_motion(scene_for(n, backend, packing))
+    state = motion.initial_state()  # pours the bed unless given a packing (not timed)
     t_setup = time.perf_counter() - t0
     _, _, r = timed_steps(motion.dem, state, steps, warm)
     backend = motion.contact_backend().backend
@@ -254,6 +275,9 @@ def main():
     ap.add_argument("--prep-timeout", type=int, default=PREP_TIMEOUT,
                     help="s per LIGGGHTS preparation call (N = 1e4 needs an idle machine "
                          "to stay below the default 300 s)")
+    ap.add_argument("--packings", default=None,
+                    help="folder of the scene's poured beds (glass-drum-3d_N.npz), reused across "
+                         "runs and poured there when missing; default: pour in every run")
     ap.add_argument("--no-liggghts", action="store_true", help="time drumheat only")
     ap.add_argument("--pair-kernel", nargs="+", default=["jax", "cpu"], choices=["jax", "cpu"],
                     help="drumheat pair kernels to time: the JAX kernel and/or the C++ loop "
@@ -284,8 +308,9 @@ def main():
         steps = args.steps or steps
         warm = args.warm or warm
         if not args.bespoke:  # the product path: the built-in scene, each backend
+            packing = scene_packing(n, args.packings)
             for kernel in args.pair_kernel:
-                r = time_scene(n, steps, warm, kernel)
+                r = time_scene(n, steps, warm, kernel, packing)
                 code = f"drumheat scene ({r['backend']})"
                 rows.append((n, code, "-", steps, r))
                 print(f"  N={n} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
