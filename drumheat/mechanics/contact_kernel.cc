@@ -33,11 +33,14 @@
 //  14 particle-wall tables (6, T, W) S: the same per particle type and wall
 //  15 wall angular velocities about z (W) S          16 temperatures (N or 0) f64
 // Attributes: dt, L (period of the last axis, 0 = none), law (conduction, < 0 = none), h
-// (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling).
+// (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling), cgap (the
+// gap tolerance of output 11).
 // Outputs: 0 forces (N, D), 1 torques (N, 3) or (N); 2 new pair springs (M, D); 3 overlap,
 // 4 centre distance, 5 normal force per pair (M); 6 new wall springs (N, W, D); 7 overlap and
 // 8 normal force per wall slot (N, W) (all zero where nothing touches); 9 the largest
-// overlap / radius (smaller radius of a pair) (1); 10 heat flow into each particle (N or 0) f64.
+// overlap / radius (smaller radius of a pair) (1); 10 heat flow into each particle (N or 0) f64;
+// 11 whether each pair conducts (M) pred: it overlaps, or its surface gap |d| - r_i - r_j is at
+// most cgap min(d_i, d_j) (the pair_conducts of forces.ContactForces.pair_gap_mask).
 //
 // Contact conduction (optional, law >= 0; drumheat/mechanics/conduction.py): the heat flow into
 // each particle Q_i = sum_j g_ij (T_j - T_i) over the conducting pairs, g = h pi min(r_i, r_j)^2
@@ -235,8 +238,9 @@ struct Call {
   const double* temp;
   void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX;
   double* Q;
+  bool* CD;
   int64_t n, m, nw, nt;
-  double dt, L, h, tol;
+  double dt, L, h, tol, cgap;
   int law;
   bool rot;
 };
@@ -257,7 +261,8 @@ void run(ffi::ThreadPool& pool, const Call& a) {
   S *WO = static_cast<S*>(a.WO), *WF = static_cast<S*>(a.WF);
   const double* TK = a.temp;
   const bool heat_on = a.law >= 0, gap_on = heat_on && a.tol > 0, rot = a.rot;
-  const S dt = S(a.dt), L = S(a.L), tol = S(a.tol);
+  const S dt = S(a.dt), L = S(a.L), tol = S(a.tol), cgap = S(a.cgap);
+  bool* CD = a.CD;
   const std::vector<Law<S>> pp = laws<S>(static_cast<const S*>(a.tpp), nt, nt);
   const std::vector<Law<S>> pw = laws<S>(static_cast<const S*>(a.tpw), nt, nw);
   const bool one_type = nt == 1;
@@ -275,7 +280,7 @@ void run(ffi::ThreadPool& pool, const Call& a) {
     for (int64_t k = k0; k < k1; ++k) {
       const int32_t i = P[k], j = P[m + k];
       S* s = Sn + D*k;
-      OV[k] = S(0); DI[k] = S(0); FN[k] = S(0);
+      OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
       if (i >= n) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
       S d[D];  // from i to j
       for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
@@ -289,12 +294,14 @@ void run(ffi::ThreadPool& pool, const Call& a) {
       const S rmin = ri < rj ? ri : rj;
       // conduction across a gap of at most tol min(d_i, d_j)
       const S gap = gap_on ? tol*(S(2)*rmin) : S(0);
+      const S cg = cgap*(S(2)*rmin);  // the gap of output 11
       // a cheap test first: the exact one below (on the overlap, as the JAX kernel decides)
       // cannot pass beyond this bound
-      const S reach = rs + gap;
+      const S reach = rs + (gap > cg ? gap : cg);
       if (dist2 > reach*reach*S(1.0001)) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
       const S dist = std::sqrt(dist2);
       const S ov = rs - dist;
+      CD[k] = cgap > S(0) ? ov >= -cg : ov > S(0);  // without a gap: while they overlap
       if (!(ov > S(0))) {
         for (int c = 0; c < D; ++c) s[c] = S(0);
         if (gap_on && ov >= -gap) {
@@ -429,12 +436,13 @@ static ffi::Error ContactsImpl(
     ffi::Buffer<ffi::S32> pairs, ffi::AnyBuffer spring, ffi::AnyBuffer wdist, ffi::AnyBuffer wnrm,
     ffi::AnyBuffer wvel, ffi::AnyBuffer wspring, ffi::AnyBuffer tab_pp, ffi::AnyBuffer tab_pw,
     ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, double dt, double L, int32_t law,
-    double h, double tol, int32_t rot, ffi::Result<ffi::AnyBuffer> force,
+    double h, double tol, int32_t rot, double cgap, ffi::Result<ffi::AnyBuffer> force,
     ffi::Result<ffi::AnyBuffer> torque, ffi::Result<ffi::AnyBuffer> nspring,
     ffi::Result<ffi::AnyBuffer> ovl_out, ffi::Result<ffi::AnyBuffer> dist_out,
     ffi::Result<ffi::AnyBuffer> fn_out, ffi::Result<ffi::AnyBuffer> nwspring,
     ffi::Result<ffi::AnyBuffer> wovl_out, ffi::Result<ffi::AnyBuffer> wfn_out,
-    ffi::Result<ffi::AnyBuffer> max_ratio, ffi::ResultBuffer<ffi::F64> heat) {
+    ffi::Result<ffi::AnyBuffer> max_ratio, ffi::ResultBuffer<ffi::F64> heat,
+    ffi::ResultBuffer<ffi::PRED> conducts) {
   const ffi::DataType et = pos.element_type();
   if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
     return ffi::Error::InvalidArgument("drumheat_contacts: positions must be f32 or f64");
@@ -462,12 +470,12 @@ static ffi::Error ContactsImpl(
   a.OV = ovl_out->untyped_data(); a.DI = dist_out->untyped_data();
   a.FN = fn_out->untyped_data(); a.WS = nwspring->untyped_data();
   a.WO = wovl_out->untyped_data(); a.WF = wfn_out->untyped_data();
-  a.MX = max_ratio->untyped_data(); a.Q = heat->typed_data();
+  a.MX = max_ratio->untyped_data(); a.Q = heat->typed_data(); a.CD = conducts->typed_data();
   a.n = pd[0];
   a.m = pairs.dimensions()[1];
   a.nw = wdist.dimensions().size() > 1 ? wdist.dimensions()[1] : 0;
   a.nt = tab_pp.dimensions()[1];
-  a.dt = dt; a.L = L; a.h = h; a.tol = tol; a.law = law; a.rot = rot != 0;
+  a.dt = dt; a.L = L; a.h = h; a.tol = tol; a.law = law; a.rot = rot != 0; a.cgap = cgap;
   const bool f64 = et == ffi::DataType::F64;
   if (dim == 3) {
     if (f64) run<double, 3>(pool, a); else run<float, 3>(pool, a);
@@ -489,8 +497,8 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Arg<ffi::Buffer<ffi::F64>>()
         .Attr<double>("dt").Attr<double>("L").Attr<int32_t>("law").Attr<double>("h")
-        .Attr<double>("tol").Attr<int32_t>("rot")
+        .Attr<double>("tol").Attr<int32_t>("rot").Attr<double>("cgap")
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
-        .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>());
+        .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>().Ret<ffi::Buffer<ffi::PRED>>());

@@ -53,11 +53,14 @@ import jax.numpy as jnp
 import numpy as np
 from drumheat.environment import cache_dir_setting
 
-__all__ = ["TARGET", "available", "check_supported", "contacts", "kernel_params", "load",
-           "unsupported_reasons"]
+__all__ = ["TARGET", "NEIGHBOR_TARGET", "available", "check_supported", "contacts",
+           "kernel_params", "load", "neighbor_pairs", "unsupported_reasons"]
 
 TARGET = "drumheat_contacts"
+NEIGHBOR_TARGET = "drumheat_neighbors"
 SOURCE = Path(__file__).with_name("contact_kernel.cc")
+#: the sources compiled into the one library: the contact loop and the neighbour rebuild
+SOURCES = (SOURCE, Path(__file__).with_name("neighbor_kernel.cc"))
 FLAGS = ("-O3", "-fno-math-errno", "-shared", "-fPIC", "-std=c++17", "-w")
 COMPILERS = ("g++", "c++", "clang++")
 COMPILE_TIMEOUT_S = 600
@@ -89,7 +92,8 @@ def _compiler() -> tuple[list[str] | None, str]:
 def _library_path() -> Path:
     import jaxlib
 
-    key = hashlib.sha256("\n".join([SOURCE.read_text(), jaxlib.__version__, *FLAGS]).encode())
+    key = hashlib.sha256("\n".join([*(f.read_text() for f in SOURCES), jaxlib.__version__,
+                                     *FLAGS]).encode())
     return _cache_dir() / f"contact_kernel_{key.hexdigest()[:16]}.so"
 
 
@@ -128,7 +132,7 @@ def _build(out: Path) -> str:
             return f"jaxlib ships no XLA FFI headers (looked in {include})"
         tmp = out.with_suffix(f".{os.getpid()}.tmp")
         log = out.with_suffix(".log")
-        full = [*cmd, *FLAGS, f"-I{include}", str(SOURCE), "-o", str(tmp)]
+        full = [*cmd, *FLAGS, f"-I{include}", *map(str, SOURCES), "-o", str(tmp)]
         t0 = time.perf_counter()
         try:
             proc = subprocess.run(full, capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S)
@@ -162,6 +166,8 @@ def _probe() -> tuple[bool, str]:
     try:
         lib = ctypes.cdll.LoadLibrary(str(out))
         jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(lib.Contacts), platform="cpu")
+        jax.ffi.register_ffi_target(NEIGHBOR_TARGET, jax.ffi.pycapsule(lib.Neighbors),
+                                    platform="cpu")
     except (OSError, AttributeError) as e:
         return False, f"the compiled C++ contact kernel {out} cannot be loaded ({e})"
     _REGISTERED = str(out)
@@ -246,7 +252,7 @@ def kernel_params(params, n_walls, dtype, dt, wall_omega, periodic_length=None,
 def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_distance,
              wall_normal, wall_velocity, wall_spring, *, tables_pp, tables_pw, wall_omega, dt,
              periodic_length=None, rotation=True, temperature=None, conduction_law=None,
-             conduction_h=0.0, gap_tolerance=0.0):
+             conduction_h=0.0, gap_tolerance=0.0, pair_gap=0.0):
     """Particle-particle and particle-wall contact forces in one C++ loop.
 
     The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
@@ -267,14 +273,17 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         ``"overlap"``, :mod:`drumheat.mechanics.conduction`), the heat flow through the
         conducting pairs (overlapping, or with a gap of at most ``gap_tolerance`` times the
         smaller diameter) at the temperatures (N,) float64 is summed in the same loop.
+      pair_gap: the gap tolerance of ``conducts`` (times the smaller diameter).
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
-    wall_overlap, wall_normal_force, max_overlap, heat)``: contact forces (N, D) and torques
+    wall_overlap, wall_normal_force, max_overlap, heat, conducts)``: contact forces (N, D) and torques
     (N, 3) or (N,) on the particles (torques zero without ``rotation``); per pair the new
     springs (M, D), overlap, centre distance and normal force (M); per wall slot the new springs
     (N, W, D), overlap and normal force (N, W); all zero where nothing touches; the largest
-    overlap / radius (the smaller radius of a pair) (1,); and the heat flow into each particle
-    (N,) float64, W (length 0 without a conduction law).
+    overlap / radius (the smaller radius of a pair) (1,); the heat flow into each particle
+    (N,) float64, W (length 0 without a conduction law); and whether each pair conducts (M,)
+    bool: it overlaps or its surface gap is at most ``pair_gap`` times the smaller diameter
+    (:meth:`drumheat.mechanics.forces.ContactForces.pair_gap_mask`, the same test).
     """
     target = load()
     dtype = jnp.dtype(pos.dtype)
@@ -295,6 +304,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
 
         law = LAWS.index(conduction_law)
     outs.append(sd((temperature.shape[0],), jnp.float64))
+    outs.append(sd((m,), jnp.bool_))
     c = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
     # springs updated in place: input 8 -> output 2 (pairs), input 12 -> output 6 (walls)
     return jax.ffi.ffi_call(target, outs, input_output_aliases={8: 2, 12: 6})(
@@ -304,4 +314,35 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         c(tables_pw), c(wall_omega), temperature.astype(jnp.float64),
         dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
         h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
-        rot=np.int32(bool(rotation)))
+        rot=np.int32(bool(rotation)), cgap=np.float64(pair_gap))
+
+
+def neighbor_pairs(position, old_idx, capacity: int, cells, cell_size, cutoff: float,
+                   periodic_length, cell_capacity: int):
+    """A neighbour rebuild in one C++ pass (``neighbor_kernel.cc``): the pairs of
+    :meth:`drumheat.mechanics.neighbors.CellGrid.build` in the canonical order of
+    :func:`~drumheat.mechanics.neighbors.sort_pairs`, pair for pair, and where each came from.
+
+    Args:
+      position: box-frame positions (N, D), float32 or float64 (the arithmetic of the JAX
+        build in that dtype); old_idx: the pairs (2, M_old) the data come from.
+      capacity: pair slots M of the new list; cells, cell_size: the grid (per axis);
+        cutoff: pair cutoff, m; periodic_length: period of the last axis or None;
+        cell_capacity: particles one cell may hold (as the JAX build: a pair whose smaller
+        index lies beyond it in its cell is not listed; the caller flags the overflow).
+    Returns ``(idx (2, M) int32 padded with N, source (M,) int32: the old slot of each new pair
+    or -1, pairs found, fullest cell)``.
+    """
+    load()
+    n, dim = position.shape
+    cells = tuple(int(c) for c in cells) + (1,) * (3 - len(cells))
+    size = tuple(float(s) for s in cell_size) + (1.0,) * (3 - len(cell_size))
+    i32 = jnp.int32
+    sd = jax.ShapeDtypeStruct
+    outs = [sd((2, int(capacity)), i32), sd((int(capacity),), i32), sd((1,), i32), sd((1,), i32)]
+    idx, src, total, fullest = jax.ffi.ffi_call(NEIGHBOR_TARGET, outs)(
+        position, old_idx.astype(i32), n0=np.int64(cells[0]), n1=np.int64(cells[1]),
+        n2=np.int64(cells[2]), s0=np.float64(size[0]), s1=np.float64(size[1]),
+        s2=np.float64(size[2]), cut2=np.float64(float(cutoff) ** 2),
+        L=np.float64(periodic_length or 0.0), cap=np.int64(cell_capacity))
+    return idx, src, total[0], fullest[0]

@@ -449,15 +449,14 @@ class CpuContactForces(ContactForces):
         if c is not None and temperature is not None:
             heat_args = dict(temperature=temperature, conduction_law=c.law,
                              conduction_h=c.coefficient, gap_tolerance=c.gap_tolerance)
-        (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx,
-         heat) = self._kernel.contacts(pos, vel, w, self.radius, self.mass, self.inertia,
-                                       self.ptype, nbrs.idx, pair_spring, wd, wn, wv,
-                                       wall_spring, **self._kernel_params, **heat_args)
+        (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat,
+         p_cond) = self._kernel.contacts(pos, vel, w, self.radius, self.mass, self.inertia,
+                                         self.ptype, nbrs.idx, pair_spring, wd, wn, wv,
+                                         wall_spring, **self._kernel_params, **heat_args,
+                                         pair_gap=self.gap_pp)
         active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
-        p_cond = active
-        if self.gap_pp > 0:  # the kernel leaves dist zero where nothing touches
-            p_cond = self.pair_gap_mask(pos, i, j)
+        # p_cond: the pairs within the conduction gap, pair_gap_mask's test in the C++ loop
         contacts = Contacts(
             pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
             pair_normal_force=fn, wall_particle=w_part, wall_index=w_idx, wall_id=w_id,
