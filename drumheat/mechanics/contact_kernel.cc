@@ -178,6 +178,14 @@ inline void add_torque(S* T, const S* a, const S* f, S sign) {
   }
 }
 
+// a spring set to zero, written only where it is not all zero bits already (most slots touch
+// nothing and hold zeros: a read instead of a write-back of every cache line)
+template <typename S, int D>
+inline void clear(S* s) {
+  static const unsigned char zero[sizeof(S) * D] = {};
+  if (std::memcmp(s, zero, sizeof zero) != 0) std::memset(s, 0, sizeof zero);
+}
+
 // conductance of a conducting pair at centre distance L (see the header), W/K
 inline double conductance(int law, double h, double ri, double rj, double L) {
   if (law == 0) {
@@ -277,11 +285,16 @@ void run(ffi::ThreadPool& pool, const Call& a) {
   auto work = [&](int64_t k0, int64_t k1, int64_t s0, int64_t s1, S* F, S* T,
                   double* Q) -> S {
     S max_ov = S(0);
+    // the per-slot outputs are zero where nothing touches: cleared in one sweep, then only the
+    // contacts written
+    std::memset(OV + k0, 0, sizeof(S) * (k1 - k0));
+    std::memset(DI + k0, 0, sizeof(S) * (k1 - k0));
+    std::memset(FN + k0, 0, sizeof(S) * (k1 - k0));
+    std::memset(CD + k0, 0, sizeof(bool) * (k1 - k0));
     for (int64_t k = k0; k < k1; ++k) {
       const int32_t i = P[k], j = P[m + k];
       S* s = Sn + D*k;
-      OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
-      if (i >= n) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
+      if (i >= n) { clear<S, D>(s); continue; }
       S d[D];  // from i to j
       for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
       // nearest periodic image of the last axis (positions are kept in [0, L), so |d| < L);
@@ -298,12 +311,12 @@ void run(ffi::ThreadPool& pool, const Call& a) {
       // a cheap test first: the exact one below (on the overlap, as the JAX kernel decides)
       // cannot pass beyond this bound
       const S reach = rs + (gap > cg ? gap : cg);
-      if (dist2 > reach*reach*S(1.0001)) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
+      if (dist2 > reach*reach*S(1.0001)) { clear<S, D>(s); continue; }
       const S dist = std::sqrt(dist2);
       const S ov = rs - dist;
       CD[k] = cgap > S(0) ? ov >= -cg : ov > S(0);  // without a gap: while they overlap
       if (!(ov > S(0))) {
-        for (int c = 0; c < D; ++c) s[c] = S(0);
+        clear<S, D>(s);
         if (gap_on && ov >= -gap) {
           const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
           Q[i] += q; Q[j] -= q;
@@ -348,7 +361,7 @@ void run(ffi::ThreadPool& pool, const Call& a) {
       const S rp = r[p];
       const S ov = rp - WD[q];
       WO[q] = S(0); WF[q] = S(0);
-      if (!(ov > S(0))) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
+      if (!(ov > S(0))) { clear<S, D>(s); continue; }
       const S* nr = WN + D*q;
       const S l = -(rp - S(0.5)*ov);
       S al[D], cw[D], vr[D], f[D];
