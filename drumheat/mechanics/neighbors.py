@@ -397,11 +397,11 @@ class NeighborSetup:
         if self.builder != "cpu":
             new = self.rebuild(position, nbrs)
             return new, pair_sources(nbrs.idx, new.idx, position.shape[0])
-        from drumheat.mechanics import cpu_kernel
+        from drumheat.mechanics.cpu_kernel import neighbor_pairs
 
         pos = self.to_box(position)
         g = self.grid
-        idx, src, total, fullest = cpu_kernel.neighbor_pairs(
+        idx, src, total, fullest = neighbor_pairs(
             pos, nbrs.idx, nbrs.max_occupancy, g.cells, g.cell_size, g.cutoff,
             self.periodic_length, nbrs.cell_list_capacity)
         error = nbrs.error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > nbrs.max_occupancy)
