@@ -51,11 +51,17 @@
 // (the gap tolerance of drumheat.thermal.network.find_contacts_2d_drum). With law < 0, the
 // temperatures and Q have length 0.
 //
-// Threads: the pair slots and wall slots are cut into C equal chunks, C = the threads of XLA's
-// intra-op pool, at most one chunk per MIN_CHUNK pair slots (DRUMHEAT_KERNEL_THREADS sets C).
-// The calling thread runs chunk 0 and then takes any chunk no pool thread has started; chunk c
-// accumulates its forces in its own buffer and the buffers are summed in chunk order, so the
-// result depends on C (round-off) and on nothing else, whichever thread ran which chunk.
+// Threads: the particles are cut into C equal ranges, C = the threads of XLA's intra-op pool, at
+// most one per MIN_CHUNK listed pairs (DRUMHEAT_KERNEL_THREADS sets C); chunk c takes the pair
+// slots whose first particle i lies in range c (the pairs come sorted by i, padding last, as
+// neighbors.sort_pairs leaves them; a list not so sorted is cut into C equal runs of slots) and
+// the wall slots of those particles. Cut by particles, the chunks share the work evenly however
+// many padding slots the list has (cut by slots, the first chunk took nearly all the pairs of a
+// list half padding), and each pair's chunk does not depend on the capacity or the skin of the
+// list. The calling thread runs chunk 0 and then takes any chunk no pool thread has started;
+// chunk c accumulates its forces in its own buffer and the buffers are summed in chunk order, so
+// the result depends on C (round-off) and on nothing else, whichever thread ran which chunk.
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -72,7 +78,7 @@ namespace ffi = xla::ffi;
 
 namespace {
 
-constexpr int64_t MIN_CHUNK = 8000;  // pair slots per chunk at least (below: one thread)
+constexpr int64_t MIN_CHUNK = 8000;  // listed pairs per chunk at least (below: one thread)
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kTables = 6;  // kn, kt, zeta_n, zeta_t, mu, mu_roll
 
@@ -395,11 +401,19 @@ void run(ffi::ThreadPool& pool, const Call& a) {
   std::memset(T0, 0, sizeof(S) * DW * n);
   if (heat_on) std::memset(Q0, 0, sizeof(double) * n);
   const int64_t slots = n * nw;
+  // listed pairs: the slots before the padding (i = n) when the list is sorted by i
+  const bool by_particle = std::is_sorted(P, P + m);
+  const int64_t listed = by_particle ? std::lower_bound(P, P + m, static_cast<int32_t>(n)) - P : m;
   int64_t nc = pool.num_threads();
-  if (nc > m / MIN_CHUNK) nc = m / MIN_CHUNK;
+  if (nc > listed / MIN_CHUNK) nc = listed / MIN_CHUNK;
   if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nc = std::atoi(e);  // exactly
-  if (nc > m) nc = m;
+  if (nc > n) nc = n;
   if (nc < 1) nc = 1;
+  // chunk c: pair slots [kb[c], kb[c + 1]), wall slots of particles [n c / nc, n (c + 1) / nc)
+  std::vector<int64_t> kb(nc + 1, m);
+  for (int64_t c = 0; c < nc; ++c)
+    kb[c] = by_particle ? std::lower_bound(P, P + m, static_cast<int32_t>(n * c / nc)) - P
+                        : m * c / nc;
   S* MX = static_cast<S*>(a.MX);
   if (nc == 1) {
     MX[0] = work(0, m, 0, slots, F0, T0, Q0);
@@ -420,7 +434,7 @@ void run(ffi::ThreadPool& pool, const Call& a) {
       F = reinterpret_cast<S*>(b); T = F + D * n; Q = b + fs;
       std::memset(b, 0, sizeof(double) * (heat_on ? fs + n : fs));
     }
-    mx[c] = work(m * c / nc, m * (c + 1) / nc, slots * c / nc, slots * (c + 1) / nc, F, T, Q);
+    mx[c] = work(kb[c], kb[c + 1], n * c / nc * nw, n * (c + 1) / nc * nw, F, T, Q);
   };
   for (int64_t t = 1; t < nc; ++t) pool.Schedule([job] { help(job); });
   job->run(0);
