@@ -291,15 +291,12 @@ void run(ffi::ThreadPool& pool, const Call& a) {
   auto work = [&](int64_t k0, int64_t k1, int64_t s0, int64_t s1, S* F, S* T,
                   double* Q) -> S {
     S max_ov = S(0);
-    // the per-slot outputs are zero where nothing touches: cleared in one sweep, then only the
-    // contacts written
-    std::memset(OV + k0, 0, sizeof(S) * (k1 - k0));
-    std::memset(DI + k0, 0, sizeof(S) * (k1 - k0));
-    std::memset(FN + k0, 0, sizeof(S) * (k1 - k0));
-    std::memset(CD + k0, 0, sizeof(bool) * (k1 - k0));
     for (int64_t k = k0; k < k1; ++k) {
       const int32_t i = P[k], j = P[m + k];
       S* s = Sn + D*k;
+      // zero where nothing touches (written here, while the line is at hand: a sweep over the
+      // whole output first would pass it through the cache twice where it does not fit)
+      OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
       if (i >= n) { clear<S, D>(s); continue; }
       S d[D];  // from i to j
       for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];

@@ -12,12 +12,17 @@ geometry (distance, normal, surface velocity of every wall at every particle) st
 the JAX walls, so every wall type works. With ``make_dem(..., conduction=...)`` the same loop
 sums the contact heat flows (:mod:`drumheat.mechanics.conduction`, both laws, with its gap
 tolerance). The loop is cut into as many chunks as XLA's intra-op thread pool has threads (at
-most one per 8 000 pair slots; ``DRUMHEAT_KERNEL_THREADS`` sets the number) and run on that
+most one per 8 000 listed pairs; ``DRUMHEAT_KERNEL_THREADS`` sets the number), each a range of
+particles with their pairs (the list is sorted by the first particle), and run on that
 pool, so no threads are started per step; each chunk sums into its own buffer and the buffers
 are added in chunk order, so the result depends on the chunk count by round-off and on nothing
 else. The pair and wall springs are updated in place (aliased buffers). Speed:
 docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
 ``scripts/bench_vs_liggghts.py`` the whole step against LIGGGHTS).
+
+The same library holds the neighbour rebuild of such runs (``neighbor_kernel.cc``,
+:func:`neighbor_pairs`): the pairs of the XLA cell list in canonical order and, for carrying the
+springs and other per-pair data, the old slot of each pair.
 
 Scope: 2D (monolayer: x-y, spin about z) and 3D, float32 and float64 mechanics, any number of
 materials (per-type contact tables), rolling resistance, walls, pair conduction, optional
