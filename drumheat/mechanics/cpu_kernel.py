@@ -281,8 +281,8 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
       pair_gap: the gap tolerance of ``conducts`` (times the smaller diameter).
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
-    wall_overlap, wall_normal_force, max_overlap, heat, conducts)``: contact forces (N, D) and torques
-    (N, 3) or (N,) on the particles (torques zero without ``rotation``); per pair the new
+    wall_overlap, wall_normal_force, max_overlap, heat, conducts)``: contact forces (N, D) and
+    torques (N, 3) or (N,) on the particles (torques zero without ``rotation``); per pair the new
     springs (M, D), overlap, centre distance and normal force (M); per wall slot the new springs
     (N, W, D), overlap and normal force (N, W); all zero where nothing touches; the largest
     overlap / radius (the smaller radius of a pair) (1,); the heat flow into each particle

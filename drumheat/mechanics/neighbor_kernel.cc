@@ -125,7 +125,7 @@ void build(const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m, int64_
       ++t;
     }
   }
-  for (int64_t k = t; k < m; ++k) { out[k] = static_cast<int32_t>(n); out[m + k] = static_cast<int32_t>(n); }
+  for (int64_t k = t; k < m; ++k) out[k] = out[m + k] = static_cast<int32_t>(n);  // padding
   *total = t;
 }
 
@@ -159,8 +159,10 @@ void sources(const int32_t* old, int64_t mo, const int32_t* nw, int64_t m, int64
 static ffi::Error NeighborsImpl(ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, int64_t n0,
                                 int64_t n1, int64_t n2, double s0, double s1, double s2,
                                 double cut2, double L, int64_t cap,
-                                ffi::ResultBuffer<ffi::S32> pairs, ffi::ResultBuffer<ffi::S32> src,
-                                ffi::ResultBuffer<ffi::S32> total, ffi::ResultBuffer<ffi::S32> fullest) {
+                                ffi::ResultBuffer<ffi::S32> pairs,
+                                ffi::ResultBuffer<ffi::S32> src,
+                                ffi::ResultBuffer<ffi::S32> total,
+                                ffi::ResultBuffer<ffi::S32> fullest) {
   const auto pd = pos.dimensions();
   if (pd.size() != 2 || (pd[1] != 2 && pd[1] != 3))
     return ffi::Error::InvalidArgument("drumheat_neighbors: positions must be (N, 2) or (N, 3)");
