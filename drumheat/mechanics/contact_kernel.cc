@@ -72,6 +72,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <vector>
 #include "xla/ffi/api/ffi.h"
 namespace ffi = xla::ffi;
@@ -188,8 +189,15 @@ inline void add_torque(S* T, const S* a, const S* f, S sign) {
 // nothing and hold zeros: a read instead of a write-back of every cache line)
 template <typename S, int D>
 inline void clear(S* s) {
-  static const unsigned char zero[sizeof(S) * D] = {};
-  if (std::memcmp(s, zero, sizeof zero) != 0) std::memset(s, 0, sizeof zero);
+  using U = std::conditional_t<sizeof(S) == 8, uint64_t, uint32_t>;  // the bits (-0 is not 0)
+  U bits = 0;
+  for (int c = 0; c < D; ++c) {
+    U u;
+    std::memcpy(&u, s + c, sizeof(S));
+    bits |= u;
+  }
+  if (bits != 0)
+    for (int c = 0; c < D; ++c) s[c] = S(0);
 }
 
 // conductance of a conducting pair at centre distance L (see the header), W/K
