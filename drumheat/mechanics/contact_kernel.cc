@@ -35,13 +35,15 @@
 //  17 wall distance before the step (N, W) S (friction heat; else length 0)
 // Attributes: dt, L (period of the last axis, 0 = none), law (conduction, < 0 = none), h
 // (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling), fh
-// (1: friction heat).
+// (1: friction heat), cgap (the gap tolerance of output 11).
 // Outputs: 0 forces (N, D), 1 torques (N, 3) or (N); 2 new pair springs (M, D); 3 overlap,
 // 4 centre distance, 5 normal force per pair (M); 6 new wall springs (N, W, D); 7 overlap and
 // 8 normal force per wall slot (N, W) (all zero where nothing touches); 9 the largest
 // overlap / radius (smaller radius of a pair) (1); 10 heat flow into each particle (N or 0) f64;
-// friction heat (length 0 without fh): 11 pair rows (M, KP) S, 12 wall rows (N W, KW) S, 13 the
-// losses at the continuous rates (3) f64.
+// 11 whether each pair conducts (M) pred: it overlaps, or its surface gap |d| - r_i - r_j is at
+// most cgap min(d_i, d_j) (the pair_conducts of forces.ContactForces.pair_gap_mask); friction
+// heat (length 0 without fh): 12 pair rows (M, KP) S, 13 wall rows (N W, KW) S, 14 the losses
+// at the continuous rates (3) f64.
 //
 // Contact conduction (optional, law >= 0; drumheat/mechanics/conduction.py): the heat flow into
 // each particle Q_i = sum_j g_ij (T_j - T_i) over the conducting pairs, g = h pi min(r_i, r_j)^2
@@ -61,7 +63,7 @@
 // k_t |xi|^2 / 2 with the overlap before the step from the positions x - dt v (pairs) or the
 // wall distance before the step (input 17); a slot that does not touch has only -U_old, its
 // springs' energy, which the model discards. The loss rates by source (contact_law with
-// dissipation=True: damping, sliding; rolling_loss) are summed over all contacts (output 13).
+// dissipation=True: damping, sliding; rolling_loss) are summed over all contacts (output 14).
 // The second pass, ContactHeat (cpu_kernel.contact_heat), takes the rows and the full-step
 // velocities and spins and gives each contact's D to its partners as step_heat does: particle
 // A gets k_A / (k_A + k_B) D and B the rest (conductivities (N) f64; length 0: half and half),
@@ -71,12 +73,18 @@
 // wall angular velocities (W) S, 7 conductivities (N or 0) f64; attributes dt, kw; outputs 0
 // the heat of each particle (N) f64, 1 the walls' and all contacts' (2) f64, J.
 //
-// Threads: the pair slots and wall slots are cut into C equal chunks, C = the threads of XLA's
-// intra-op pool, at most one chunk per MIN_CHUNK pair slots (DRUMHEAT_KERNEL_THREADS sets C).
-// The calling thread runs chunk 0 and then takes any chunk no pool thread has started; chunk c
-// accumulates its forces (and the second pass its heat) in its own buffer and the buffers are
-// summed in chunk order, so the result depends on C (round-off) and on nothing else, whichever
-// thread ran which chunk.
+// Threads: the particles are cut into C equal ranges, C = the threads of XLA's intra-op pool, at
+// most one per MIN_CHUNK listed pairs (DRUMHEAT_KERNEL_THREADS sets C); chunk c takes the pair
+// slots whose first particle i lies in range c (the pairs come sorted by i, padding last, as
+// neighbors.sort_pairs leaves them; a list not so sorted is cut into C equal runs of slots) and
+// the wall slots of those particles. Cut by particles, the chunks share the work evenly however
+// many padding slots the list has (cut by slots, the first chunk took nearly all the pairs of a
+// list half padding), and each pair's chunk does not depend on the capacity or the skin of the
+// list. Both passes (Contacts and ContactHeat) cut their chunks so. The calling thread runs
+// chunk 0 and then takes any chunk no pool thread has started; chunk c accumulates its forces
+// (and the second pass its heat) in its own buffer and the buffers are summed in chunk order, so
+// the result depends on C (round-off) and on nothing else, whichever thread ran which chunk.
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -87,13 +95,14 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <vector>
 #include "xla/ffi/api/ffi.h"
 namespace ffi = xla::ffi;
 
 namespace {
 
-constexpr int64_t MIN_CHUNK = 8000;  // pair slots per chunk at least (below: one thread)
+constexpr int64_t MIN_CHUNK = 8000;  // listed pairs per chunk at least (below: one thread)
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kTables = 6;  // kn, kt, zeta_n, zeta_t, mu, mu_roll
 
@@ -222,6 +231,21 @@ inline void add_torque(S* T, const S* a, const S* f, S sign) {
   }
 }
 
+// a spring set to zero, written only where it is not all zero bits already (most slots touch
+// nothing and hold zeros: a read instead of a write-back of every cache line)
+template <typename S, int D>
+inline void clear(S* s) {
+  using U = std::conditional_t<sizeof(S) == 8, uint64_t, uint32_t>;  // the bits (-0 is not 0)
+  U bits = 0;
+  for (int c = 0; c < D; ++c) {
+    U u;
+    std::memcpy(&u, s + c, sizeof(S));
+    bits |= u;
+  }
+  if (bits != 0)
+    for (int c = 0; c < D; ++c) s[c] = S(0);
+}
+
 // conductance of a conducting pair at centre distance L (see the header), W/K
 inline double conductance(int law, double h, double ri, double rj, double L) {
   if (law == 0) {
@@ -275,14 +299,32 @@ void help(const std::shared_ptr<Job>& job) {
   job->active.fetch_sub(1);
 }
 
-// the number of chunks C for m pair slots (see the header)
-int64_t chunk_count(ffi::ThreadPool& pool, int64_t m) {
+// The chunks of a call (see the header): chunk c takes the pair slots [kb[c], kb[c + 1]) and
+// the wall slots of the particles [n c / nc, n (c + 1) / nc)
+struct Chunks {
+  int64_t n, nw, nc;
+  std::vector<int64_t> kb;
+  int64_t s0(int64_t c) const { return n * c / nc * nw; }  // the first wall slot of chunk c
+  int64_t s1(int64_t c) const { return n * (c + 1) / nc * nw; }  // past its last
+};
+
+// the chunks for the pairs P (2, M) of n particles with nw walls: C from the listed pairs (the
+// slots before the padding i = n when the list is sorted by i), the pair slots cut where the
+// particle ranges begin (equal runs of slots if the list is not sorted by i)
+Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int64_t nw) {
+  const bool by_particle = std::is_sorted(P, P + m);
+  const int64_t listed =
+      by_particle ? std::lower_bound(P, P + m, static_cast<int32_t>(n)) - P : m;
   int64_t nc = pool.num_threads();
-  if (nc > m / MIN_CHUNK) nc = m / MIN_CHUNK;
+  if (nc > listed / MIN_CHUNK) nc = listed / MIN_CHUNK;
   if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nc = std::atoi(e);  // exactly
-  if (nc > m) nc = m;
+  if (nc > n) nc = n;
   if (nc < 1) nc = 1;
-  return nc;
+  Chunks ch{n, nw, nc, std::vector<int64_t>(nc + 1, m)};
+  for (int64_t c = 0; c < nc; ++c)
+    ch.kb[c] = by_particle ? std::lower_bound(P, P + m, static_cast<int32_t>(n * c / nc)) - P
+                           : m * c / nc;
+  return ch;
 }
 
 // run(c) for the chunks c = 0 .. nc - 1: chunk 0 on the calling thread, the others on whichever
@@ -333,8 +375,9 @@ struct Call {
   const double* temp;
   void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX, *PW, *WW;
   double *Q, *R;
+  bool* CD;
   int64_t n, m, nw, nt;
-  double dt, L, h, tol;
+  double dt, L, h, tol, cgap;
   int law;
   bool rot, fh;
 };
@@ -352,9 +395,10 @@ struct Loop {
   const S *x, *v, *w, *r, *ms, *in, *sp, *WD, *WN, *WV, *WS, *WOM, *WD0;
   const int32_t *pt, *P;
   S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;
+  bool* CD;
   const double* TK;
   bool heat_on, gap_on, rot, fh, one_type, roll_pp = false, roll_pw = false;
-  S dt, L, tol;
+  S dt, L, tol, cgap;
   std::vector<Law<S>> pp, pw;
 
   explicit Loop(const Call& c) : a(c), n(c.n), m(c.m), nw(c.nw), nt(c.nt) {
@@ -370,9 +414,10 @@ struct Loop {
     OV = static_cast<S*>(a.OV); DI = static_cast<S*>(a.DI); FN = static_cast<S*>(a.FN);
     WO = static_cast<S*>(a.WO); WF = static_cast<S*>(a.WF);
     PW = static_cast<S*>(a.PW); WW = static_cast<S*>(a.WW);
+    CD = a.CD;
     TK = a.temp;
     heat_on = a.law >= 0; gap_on = heat_on && a.tol > 0; rot = a.rot; fh = a.fh;
-    dt = S(a.dt); L = S(a.L); tol = S(a.tol);
+    dt = S(a.dt); L = S(a.L); tol = S(a.tol); cgap = S(a.cgap);
     pp = laws<S>(static_cast<const S*>(a.tpp), nt, nt);
     pw = laws<S>(static_cast<const S*>(a.tpw), nt, nw);
     one_type = nt == 1;
@@ -389,9 +434,11 @@ struct Loop {
     S* s = Sn + D*k;
     const S* so = sp + D*k;
     S* hw = fh ? PW + KP*k : nullptr;  // friction heat row (header)
+    // zero where nothing touches (written here, while the line is at hand: a sweep over the
+    // whole output first would pass it through the cache twice where it does not fit)
     if (fh) for (int c = 0; c < KP; ++c) hw[c] = S(0);
-    OV[k] = S(0); DI[k] = S(0); FN[k] = S(0);
-    if (i >= n) { for (int c = 0; c < D; ++c) s[c] = S(0); continue; }
+    OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
+    if (i >= n) { clear<S, D>(s); continue; }
     S d[D];  // from i to j
     for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
     // nearest periodic image of the last axis (positions are kept in [0, L), so |d| < L);
@@ -409,19 +456,21 @@ struct Loop {
                      : S(0);
     // conduction across a gap of at most tol min(d_i, d_j)
     const S gap = gap_on ? tol*(S(2)*rmin) : S(0);
+    const S cg = cgap*(S(2)*rmin);  // the gap of output 11
     // a cheap test first: the exact one below (on the overlap, as the JAX kernel decides)
     // cannot pass beyond this bound
-    const S reach = rs + gap;
+    const S reach = rs + (gap > cg ? gap : cg);
     if (dist2 > reach*reach*S(1.0001)) {
       if (fh) opened<S>(law, ov0, xi2, hw + KP - 1, R);
-      for (int c = 0; c < D; ++c) s[c] = S(0);
+      clear<S, D>(s);
       continue;
     }
     const S dist = std::sqrt(dist2);
     const S ov = rs - dist;
+    CD[k] = cgap > S(0) ? ov >= -cg : ov > S(0);  // without a gap: while they overlap
     if (!(ov > S(0))) {
       if (fh) opened<S>(law, ov0, xi2, hw + KP - 1, R);
-      for (int c = 0; c < D; ++c) s[c] = S(0);
+      clear<S, D>(s);
       if (gap_on && ov >= -gap) {
         const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
         Q[i] += q; Q[j] -= q;
@@ -485,7 +534,7 @@ struct Loop {
     WO[q] = S(0); WF[q] = S(0);
     if (!(ov > S(0))) {
       if (fh) opened<S>(law, ov0, xi2, hw + KW - 1, R);
-      for (int c = 0; c < D; ++c) s[c] = S(0);
+      clear<S, D>(s);
       continue;
     }
     const S* nr = WN + D*q;
@@ -540,8 +589,8 @@ void run(ffi::ThreadPool& pool, const Call& a) {
   std::memset(T0, 0, sizeof(S) * DW * n);
   if (heat_on) std::memset(Q0, 0, sizeof(double) * n);
   std::memset(R0, 0, sizeof(double) * 3);
-  const int64_t slots = n * a.nw;
-  const int64_t nc = chunk_count(pool, m);
+  const Chunks ch = chunks(pool, a.P, n, m, a.nw);
+  const int64_t nc = ch.nc;
   S* MX = static_cast<S*>(a.MX);
   // a buffer holds the (D + DW) N forces and torques in its first fs doubles, then N doubles
   // of conduction heat, then 3 of loss rates (chunk 0 writes into the outputs)
@@ -559,8 +608,7 @@ void run(ffi::ThreadPool& pool, const Call& a) {
       std::memset(R, 0, sizeof(double) * 3);
       if (heat_on) std::memset(Q, 0, sizeof(double) * n);
     }
-    mx[c] = work(m * c / nc, m * (c + 1) / nc, slots * c / nc, slots * (c + 1) / nc, F, T, Q,
-                 R);
+    mx[c] = work(ch.kb[c], ch.kb[c + 1], ch.s0(c), ch.s1(c), F, T, Q, R);
   });
   S max_ov = mx[0];
   for (int64_t c = 1; c < nc; ++c) {
@@ -593,7 +641,7 @@ template <typename S, int D>
 void heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
   constexpr int DW = D == 3 ? 3 : 1;
   constexpr int KP = 3*D + DW + 1, KW = 2*D + DW + 1;
-  const int64_t n = a.n, m = a.m, nw = a.nw, slots = n * nw;
+  const int64_t n = a.n, m = a.m, nw = a.nw;
   const S *v = static_cast<const S*>(a.v), *w = static_cast<const S*>(a.w);
   const S *PW = static_cast<const S*>(a.PW), *WW = static_cast<const S*>(a.WW);
   const S *WV = static_cast<const S*>(a.wv), *WOM = static_cast<const S*>(a.wom);
@@ -630,7 +678,8 @@ void heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
   double *E0 = a.E, *S0 = a.SUM;
   std::memset(E0, 0, sizeof(double) * n);
   S0[0] = S0[1] = 0.0;
-  const int64_t nc = chunk_count(pool, m);
+  const Chunks ch = chunks(pool, P, n, m, nw);  // as the first pass cut them
+  const int64_t nc = ch.nc;
   std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
   for (auto& b : acc) b = take_buffer(n + 2);
   for_chunks(pool, nc, [&](int c) {
@@ -639,7 +688,7 @@ void heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
       E = acc[c - 1]->data(); sums = E + n;
       std::memset(E, 0, sizeof(double) * (n + 2));
     }
-    work(m * c / nc, m * (c + 1) / nc, slots * c / nc, slots * (c + 1) / nc, E, sums);
+    work(ch.kb[c], ch.kb[c + 1], ch.s0(c), ch.s1(c), E, sums);
   });
   for (int64_t c = 1; c < nc; ++c) {
     const double* b = acc[c - 1]->data();
@@ -657,13 +706,14 @@ static ffi::Error ContactsImpl(
     ffi::Buffer<ffi::S32> pairs, ffi::AnyBuffer spring, ffi::AnyBuffer wdist, ffi::AnyBuffer wnrm,
     ffi::AnyBuffer wvel, ffi::AnyBuffer wspring, ffi::AnyBuffer tab_pp, ffi::AnyBuffer tab_pw,
     ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, ffi::AnyBuffer wdist0, double dt,
-    double L, int32_t law, double h, double tol, int32_t rot, int32_t fh,
+    double L, int32_t law, double h, double tol, int32_t rot, int32_t fh, double cgap,
     ffi::Result<ffi::AnyBuffer> force, ffi::Result<ffi::AnyBuffer> torque,
     ffi::Result<ffi::AnyBuffer> nspring, ffi::Result<ffi::AnyBuffer> ovl_out,
     ffi::Result<ffi::AnyBuffer> dist_out, ffi::Result<ffi::AnyBuffer> fn_out,
     ffi::Result<ffi::AnyBuffer> nwspring, ffi::Result<ffi::AnyBuffer> wovl_out,
     ffi::Result<ffi::AnyBuffer> wfn_out, ffi::Result<ffi::AnyBuffer> max_ratio,
-    ffi::ResultBuffer<ffi::F64> heat, ffi::Result<ffi::AnyBuffer> pair_rows,
+    ffi::ResultBuffer<ffi::F64> heat, ffi::ResultBuffer<ffi::PRED> conducts,
+    ffi::Result<ffi::AnyBuffer> pair_rows,
     ffi::Result<ffi::AnyBuffer> wall_rows, ffi::ResultBuffer<ffi::F64> rates) {
   const ffi::DataType et = pos.element_type();
   if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
@@ -693,13 +743,14 @@ static ffi::Error ContactsImpl(
   a.OV = ovl_out->untyped_data(); a.DI = dist_out->untyped_data();
   a.FN = fn_out->untyped_data(); a.WS = nwspring->untyped_data();
   a.WO = wovl_out->untyped_data(); a.WF = wfn_out->untyped_data();
-  a.MX = max_ratio->untyped_data(); a.Q = heat->typed_data();
+  a.MX = max_ratio->untyped_data(); a.Q = heat->typed_data(); a.CD = conducts->typed_data();
   a.PW = pair_rows->untyped_data(); a.WW = wall_rows->untyped_data(); a.R = rates->typed_data();
   a.n = pd[0];
   a.m = pairs.dimensions()[1];
   a.nw = wdist.dimensions().size() > 1 ? wdist.dimensions()[1] : 0;
   a.nt = tab_pp.dimensions()[1];
   a.dt = dt; a.L = L; a.h = h; a.tol = tol; a.law = law; a.rot = rot != 0; a.fh = fh != 0;
+  a.cgap = cgap;
   const int dw = dim == 3 ? 3 : 1;
   if (a.fh && (static_cast<int64_t>(pair_rows->element_count()) != a.m * (3*dim + dw + 1) ||
                static_cast<int64_t>(wall_rows->element_count()) != a.n * a.nw * (2*dim + dw + 1) ||
@@ -726,11 +777,11 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::AnyBuffer>()
         .Attr<double>("dt").Attr<double>("L").Attr<int32_t>("law").Attr<double>("h")
-        .Attr<double>("tol").Attr<int32_t>("rot").Attr<int32_t>("fh")
+        .Attr<double>("tol").Attr<int32_t>("rot").Attr<int32_t>("fh").Attr<double>("cgap")
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
-        .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>()
+        .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>().Ret<ffi::Buffer<ffi::PRED>>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>());
 
 // The friction heat's second pass (ContactHeat; see the header).

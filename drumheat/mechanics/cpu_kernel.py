@@ -12,12 +12,17 @@ geometry (distance, normal, surface velocity of every wall at every particle) st
 the JAX walls, so every wall type works. With ``make_dem(..., conduction=...)`` the same loop
 sums the contact heat flows (:mod:`drumheat.mechanics.conduction`, both laws, with its gap
 tolerance). The loop is cut into as many chunks as XLA's intra-op thread pool has threads (at
-most one per 8 000 pair slots; ``DRUMHEAT_KERNEL_THREADS`` sets the number) and run on that
+most one per 8 000 listed pairs; ``DRUMHEAT_KERNEL_THREADS`` sets the number), each a range of
+particles with their pairs (the list is sorted by the first particle), and run on that
 pool, so no threads are started per step; each chunk sums into its own buffer and the buffers
 are added in chunk order, so the result depends on the chunk count by round-off and on nothing
 else. The pair and wall springs are updated in place (aliased buffers). Speed:
 docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
 ``scripts/bench_vs_liggghts.py`` the whole step against LIGGGHTS).
+
+The same library holds the neighbour rebuild of such runs (``neighbor_kernel.cc``,
+:func:`neighbor_pairs`): the pairs of the XLA cell list in canonical order and, for carrying the
+springs and other per-pair data, the old slot of each pair.
 
 Scope: 2D (monolayer: x-y, spin about z) and 3D, float32 and float64 mechanics, any number of
 materials (per-type contact tables), rolling resistance, walls, pair conduction, friction
@@ -62,12 +67,16 @@ import jax.numpy as jnp
 import numpy as np
 from drumheat.environment import cache_dir_setting
 
-__all__ = ["TARGET", "HEAT_TARGET", "available", "check_supported", "contacts", "contact_heat",
-           "kernel_params", "load", "unsupported_reasons"]
+__all__ = ["TARGET", "HEAT_TARGET", "NEIGHBOR_TARGET", "available", "check_supported",
+           "contacts", "contact_heat", "kernel_params", "load", "neighbor_pairs",
+           "unsupported_reasons"]
 
 TARGET = "drumheat_contacts"
 HEAT_TARGET = "drumheat_contact_heat"  # the friction heat's second pass
+NEIGHBOR_TARGET = "drumheat_neighbors"
 SOURCE = Path(__file__).with_name("contact_kernel.cc")
+#: the sources compiled into the one library: the contact loop and the neighbour rebuild
+SOURCES = (SOURCE, Path(__file__).with_name("neighbor_kernel.cc"))
 FLAGS = ("-O3", "-fno-math-errno", "-shared", "-fPIC", "-std=c++17", "-w")
 COMPILERS = ("g++", "c++", "clang++")
 COMPILE_TIMEOUT_S = 600
@@ -99,7 +108,8 @@ def _compiler() -> tuple[list[str] | None, str]:
 def _library_path() -> Path:
     import jaxlib
 
-    key = hashlib.sha256("\n".join([SOURCE.read_text(), jaxlib.__version__, *FLAGS]).encode())
+    key = hashlib.sha256("\n".join([*(f.read_text() for f in SOURCES), jaxlib.__version__,
+                                     *FLAGS]).encode())
     return _cache_dir() / f"contact_kernel_{key.hexdigest()[:16]}.so"
 
 
@@ -138,7 +148,7 @@ def _build(out: Path) -> str:
             return f"jaxlib ships no XLA FFI headers (looked in {include})"
         tmp = out.with_suffix(f".{os.getpid()}.tmp")
         log = out.with_suffix(".log")
-        full = [*cmd, *FLAGS, f"-I{include}", str(SOURCE), "-o", str(tmp)]
+        full = [*cmd, *FLAGS, f"-I{include}", *map(str, SOURCES), "-o", str(tmp)]
         t0 = time.perf_counter()
         try:
             proc = subprocess.run(full, capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S)
@@ -173,6 +183,8 @@ def _probe() -> tuple[bool, str]:
         lib = ctypes.cdll.LoadLibrary(str(out))
         jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(lib.Contacts), platform="cpu")
         jax.ffi.register_ffi_target(HEAT_TARGET, jax.ffi.pycapsule(lib.ContactHeat),
+                                    platform="cpu")
+        jax.ffi.register_ffi_target(NEIGHBOR_TARGET, jax.ffi.pycapsule(lib.Neighbors),
                                     platform="cpu")
     except (OSError, AttributeError) as e:
         return False, f"the compiled C++ contact kernel {out} cannot be loaded ({e})"
@@ -260,7 +272,8 @@ def _rows(dim: int) -> tuple[int, int]:
 def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_distance,
              wall_normal, wall_velocity, wall_spring, *, tables_pp, tables_pw, wall_omega, dt,
              periodic_length=None, rotation=True, temperature=None, conduction_law=None,
-             conduction_h=0.0, gap_tolerance=0.0, wall_distance_before=None):
+             conduction_h=0.0, gap_tolerance=0.0, wall_distance_before=None,
+             pair_gap=0.0):
     """Particle-particle and particle-wall contact forces in one C++ loop.
 
     The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
@@ -285,13 +298,18 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         distance (N, W) at the positions before the step's drift ``pos - dt vel`` and time
         ``t - dt``; with it the loop also returns what :func:`contact_heat` needs.
 
+      pair_gap: the gap tolerance of ``conducts`` (times the smaller diameter).
+
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
-    wall_overlap, wall_normal_force, max_overlap, heat, pair_rows, wall_rows, rates)``: contact
-    forces (N, D) and torques (N, 3) or (N,) on the particles (torques zero without
-    ``rotation``); per pair the new springs (M, D), overlap, centre distance and normal force
-    (M); per wall slot the new springs (N, W, D), overlap and normal force (N, W); all zero
-    where nothing touches; the largest overlap / radius (the smaller radius of a pair) (1,);
-    the heat flow into each particle (N,) float64, W (length 0 without a conduction law); with
+    wall_overlap, wall_normal_force, max_overlap, heat, conducts, pair_rows, wall_rows,
+    rates)``: contact forces (N, D) and torques (N, 3) or (N,) on the particles (torques zero
+    without ``rotation``); per pair the new springs (M, D), overlap, centre distance and normal
+    force (M); per wall slot the new springs (N, W, D), overlap and normal force (N, W); all
+    zero where nothing touches; the largest overlap / radius (the smaller radius of a pair)
+    (1,); the heat flow into each particle (N,) float64, W (length 0 without a conduction law);
+    whether each pair conducts (M,) bool: it overlaps or its surface gap is at most
+    ``pair_gap`` times the smaller diameter
+    (:meth:`drumheat.mechanics.forces.ContactForces.pair_gap_mask`, the same test); with
     ``wall_distance_before`` (else length 0) each contact's friction-heat row (pairs (M, K_p),
     wall slots (N W, K_w): force on B, levers, rolling torque, ``U_new - U_old``) and the
     step's losses at the continuous rates (3,) float64, J: damping, sliding, rolling.
@@ -315,6 +333,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
 
         law = LAWS.index(conduction_law)
     outs.append(sd((temperature.shape[0],), jnp.float64))
+    outs.append(sd((m,), jnp.bool_))
     fh = wall_distance_before is not None
     kp, kw = _rows(dim)
     outs += [sd((m, kp) if fh else (0,), dtype), sd((n * nw, kw) if fh else (0,), dtype),
@@ -329,7 +348,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         c(tables_pw), c(wall_omega), temperature.astype(jnp.float64), c(wd0),
         dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
         h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
-        rot=np.int32(bool(rotation)), fh=np.int32(fh))
+        rot=np.int32(bool(rotation)), fh=np.int32(fh), cgap=np.float64(pair_gap))
 
 
 def contact_heat(vel, omega, idx, pair_rows, wall_rows, wall_velocity, wall_omega, dt,
@@ -355,3 +374,34 @@ def contact_heat(vel, omega, idx, pair_rows, wall_rows, wall_velocity, wall_omeg
         vel, c(omega).reshape((n, 3) if dim == 3 else (n,)), idx.astype(jnp.int32),
         pair_rows, wall_rows, c(wall_velocity), c(wall_omega), k,
         dt=np.float64(dt), kw=np.float64(wall_conductivity))
+
+
+def neighbor_pairs(position, old_idx, capacity: int, cells, cell_size, cutoff: float,
+                   periodic_length, cell_capacity: int):
+    """A neighbour rebuild in one C++ pass (``neighbor_kernel.cc``): the pairs of
+    :meth:`drumheat.mechanics.neighbors.CellGrid.build` in the canonical order of
+    :func:`~drumheat.mechanics.neighbors.sort_pairs`, pair for pair, and where each came from.
+
+    Args:
+      position: box-frame positions (N, D), float32 or float64 (the arithmetic of the JAX
+        build in that dtype); old_idx: the pairs (2, M_old) the data come from.
+      capacity: pair slots M of the new list; cells, cell_size: the grid (per axis);
+        cutoff: pair cutoff, m; periodic_length: period of the last axis or None;
+        cell_capacity: particles one cell may hold (as the JAX build: a pair whose smaller
+        index lies beyond it in its cell is not listed; the caller flags the overflow).
+    Returns ``(idx (2, M) int32 padded with N, source (M,) int32: the old slot of each new pair
+    or -1, pairs found, fullest cell)``.
+    """
+    load()
+    n, dim = position.shape
+    cells = tuple(int(c) for c in cells) + (1,) * (3 - len(cells))
+    size = tuple(float(s) for s in cell_size) + (1.0,) * (3 - len(cell_size))
+    i32 = jnp.int32
+    sd = jax.ShapeDtypeStruct
+    outs = [sd((2, int(capacity)), i32), sd((int(capacity),), i32), sd((1,), i32), sd((1,), i32)]
+    idx, src, total, fullest = jax.ffi.ffi_call(NEIGHBOR_TARGET, outs)(
+        position, old_idx.astype(i32), n0=np.int64(cells[0]), n1=np.int64(cells[1]),
+        n2=np.int64(cells[2]), s0=np.float64(size[0]), s1=np.float64(size[1]),
+        s2=np.float64(size[2]), cut2=np.float64(float(cutoff) ** 2),
+        L=np.float64(periodic_length or 0.0), cap=np.int64(cell_capacity))
+    return idx, src, total[0], fullest[0]

@@ -476,15 +476,14 @@ class CpuContactForces(ContactForces):
         if self.friction_heat is not None:  # the walls before the step, as JaxContactForces
             heat_args["wall_distance_before"] = self.wall_geometry(pos - self.dt_c * vel,
                                                                    t - self.dt)[0]
-        (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, pair_rows,
-         wall_rows, rates) = self._kernel.contacts(
+        (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, p_cond,
+         pair_rows, wall_rows, rates) = self._kernel.contacts(
             pos, vel, w, self.radius, self.mass, self.inertia, self.ptype, nbrs.idx,
-            pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args)
+            pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
+            pair_gap=self.gap_pp)
         active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
-        p_cond = active
-        if self.gap_pp > 0:  # the kernel leaves dist zero where nothing touches
-            p_cond = self.pair_gap_mask(pos, i, j)
+        # p_cond: the pairs within the conduction gap, pair_gap_mask's test in the C++ loop
         contacts = Contacts(
             pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
             pair_normal_force=fn, wall_particle=w_part, wall_index=w_idx, wall_id=w_id,

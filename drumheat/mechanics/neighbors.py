@@ -31,7 +31,12 @@ codes of ``jax_md.partition.NeighborList``, so code written for jax-md's lists r
   force sums do not depend on when the list was built.
 * History across rebuilds: after a rebuild, :func:`remap_pair_data` finds every new pair in the
   old pair list (a binary search on ``(i, j)`` in the sorted old list, int32) and carries its
-  data over; new pairs start with zero history.
+  data over; new pairs start with zero history (:func:`pair_sources` finds,
+  :func:`take_pair_data` carries).
+* On CPU with the C++ contact loop the rebuild of a run is one C++ pass
+  (``NeighborSetup(builder="cpu")``, :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`):
+  the same pairs in the same canonical order and the same sources, 5-10x quicker than the
+  XLA build (docs/performance.md); allocations stay in XLA.
 """
 
 from __future__ import annotations
@@ -53,6 +58,8 @@ __all__ = [
     "NeighborSetup",
     "make_neighbor_setup",
     "remap_pair_data",
+    "pair_sources",
+    "take_pair_data",
     "pair_keys",
     "sort_pairs",
 ]
@@ -95,21 +102,14 @@ def pair_keys(idx, n):
     return i * (n + 1) + j
 
 
-def remap_pair_data(old_idx, old_data, new_idx, n, old_sorted: bool = False):
-    """Carry per-pair data from an old pair list to a new one (pairs matched by identity).
-
-    Args:
-      old_idx, new_idx: OrderedSparse neighbour indices (2, M_old) and (2, M_new).
-      old_data: array (M_old, ...) aligned with ``old_idx``.
-      n: number of particles (padding value).
-      old_sorted: ``old_idx`` is in canonical order already (:func:`sort_pairs`; every list
-        the integrator holds is), which saves sorting it.
-    Returns:
-      array (M_new, ...): the old data of pairs present in both lists, zeros for new pairs
-      and padding.
+def pair_sources(old_idx, new_idx, n, old_sorted: bool = False):
+    """For each column of ``new_idx``, the column of ``old_idx`` holding the same pair, or -1
+    (a new pair, padding), int32: pairs matched by identity.
 
     Each new pair is found in the old list by a binary search on ``(i, j)`` in lexicographic
     order, in int32 (no int64 keys ``i (N+1) + j``: the temporaries are a few int32 per pair).
+    ``old_sorted=True``: ``old_idx`` is already sorted by ``(i, j)`` (:func:`sort_pairs`), so
+    the sort is skipped.
     """
     m_old = old_idx.shape[1]
     order = None
@@ -141,9 +141,34 @@ def remap_pair_data(old_idx, old_data, new_idx, n, old_sorted: bool = False):
     pos = jnp.minimum(pos, m_old - 1)
     found = (old_idx[0, pos] == ni) & (old_idx[1, pos] == nj) & (ni < n)
     src = pos if order is None else order[pos]
-    gathered = old_data[src]
+    return jnp.where(found, src, -1).astype(jnp.int32)
+
+
+def take_pair_data(old_data, source):
+    """Per-pair data (M_old, ...) moved to a new list by :func:`pair_sources`' ``source``
+    (M_new,): the old data where the pair was listed before, zeros for new pairs and padding."""
+    found = source >= 0
+    gathered = old_data[jnp.maximum(source, 0)]
     mask = found.reshape(found.shape + (1,) * (old_data.ndim - 1))
     return jnp.where(mask, gathered, 0)
+
+
+def remap_pair_data(old_idx, old_data, new_idx, n, old_sorted: bool = False):
+    """Carry per-pair data from an old pair list to a new one (pairs matched by identity).
+
+    Args:
+      old_idx, new_idx: OrderedSparse neighbour indices (2, M_old) and (2, M_new).
+      old_data: array (M_old, ...) aligned with ``old_idx``.
+      n: number of particles (padding value).
+      old_sorted: ``old_idx`` is in canonical order already (:func:`sort_pairs`; every list
+        the integrator holds is), which saves sorting it.
+    Returns:
+      array (M_new, ...): the old data of pairs present in both lists, zeros for new pairs
+      and padding.
+
+    :func:`take_pair_data` of :func:`pair_sources` (``old_sorted`` as there).
+    """
+    return take_pair_data(old_data, pair_sources(old_idx, new_idx, n, old_sorted))
 
 
 def sort_pairs(nbrs, n):
@@ -345,7 +370,10 @@ class NeighborSetup:
       dim: spatial dimension; lo, box: lower corner and size of the domain box (m);
       periodic_length: drum-axis period L (m) or None; cutoff: ``2 r_max + skin`` (m);
       skin (m); capacity_multiplier: head room of a fresh allocation;
-      displacement: minimum-image displacement; grid: the :class:`CellGrid` that builds.
+      displacement: minimum-image displacement; grid: the :class:`CellGrid` that builds;
+      builder: who rebuilds in a run (:meth:`rebuild_with_sources`): ``"jax"`` (the
+      :class:`CellGrid`, every backend) or ``"cpu"`` (the same pairs from one C++ pass,
+      :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`; with the C++ contact loop).
     """
 
     dim: int
@@ -357,6 +385,7 @@ class NeighborSetup:
     capacity_multiplier: float
     displacement: Callable
     grid: CellGrid
+    builder: str = "jax"
 
     def to_box(self, position):
         """Positions in the box frame (shifted by ``-lo``)."""
@@ -399,6 +428,26 @@ class NeighborSetup:
         built = self.grid.build(pos, nbrs.max_occupancy, nbrs.cell_list_capacity)
         return self._list(pos, built, nbrs.error, nbrs.cell_list_capacity)
 
+    def rebuild_with_sources(self, position, nbrs):
+        """``(rebuilt list, source)`` (jittable): :meth:`rebuild`, and for each new pair slot
+        the old slot of the same pair or -1 (:func:`pair_sources`; :func:`take_pair_data`
+        moves per-pair data with it). With ``builder="cpu"`` one C++ pass finds the same pairs
+        in the same order (``tests/test_neighbors.py`` holds the two equal)."""
+        if self.builder != "cpu":
+            new = self.rebuild(position, nbrs)
+            return new, pair_sources(nbrs.idx, new.idx, position.shape[0], old_sorted=True)
+        from drumheat.mechanics.cpu_kernel import neighbor_pairs
+
+        pos = self.to_box(position)
+        g = self.grid
+        idx, src, total, fullest = neighbor_pairs(
+            pos, nbrs.idx, nbrs.max_occupancy, g.cells, g.cell_size, g.cutoff,
+            self.periodic_length, nbrs.cell_list_capacity)
+        error = nbrs.error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > nbrs.max_occupancy)
+        error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > nbrs.cell_list_capacity)
+        return NeighborList(idx, pos, error, nbrs.cell_list_capacity, nbrs.max_occupancy,
+                            self.cutoff), src
+
     def max_displacement_sq(self, position, nbrs):
         """Largest squared displacement (m^2) of any particle since the last build."""
         d = jax.vmap(self.displacement)(self.to_box(position), nbrs.reference_position)
@@ -421,8 +470,9 @@ def _build(grid: CellGrid, pos, capacity: int, cell_capacity: int):
 
 
 def make_neighbor_setup(dim, lo, hi, cutoff, skin, periodic_length=None,
-                        capacity_multiplier=1.5) -> NeighborSetup:
-    """Neighbour search for the box ``[lo, hi]`` (m); along a periodic axis ``[0, L)``."""
+                        capacity_multiplier=1.5, builder="jax") -> NeighborSetup:
+    """Neighbour search for the box ``[lo, hi]`` (m); along a periodic axis ``[0, L)``;
+    ``builder``: see :class:`NeighborSetup`."""
     lo = np.asarray(lo, dtype=float).copy()
     hi = np.asarray(hi, dtype=float).copy()
     if periodic_length is not None:
@@ -432,5 +482,7 @@ def make_neighbor_setup(dim, lo, hi, cutoff, skin, periodic_length=None,
         raise ValueError(f"neighbour box must be finite and positive, got lo={lo}, hi={hi}")
     disp = make_displacement(dim, periodic_length)
     grid = make_cell_grid(dim, box, float(cutoff), periodic_length, disp)
+    if builder not in ("jax", "cpu"):
+        raise ValueError(f"neighbour builder must be 'jax' or 'cpu', got {builder!r}")
     return NeighborSetup(dim, lo, box, periodic_length, float(cutoff), float(skin),
-                         float(capacity_multiplier), disp, grid)
+                         float(capacity_multiplier), disp, grid, builder)

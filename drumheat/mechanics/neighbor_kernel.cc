@@ -1,0 +1,200 @@
+// Neighbour-list rebuild for CPU as one pass: an XLA FFI custom call (mechanics/cpu_kernel.py,
+// `neighbor_pairs`), the C++ twin of drumheat.mechanics.neighbors.CellGrid.build followed by
+// sort_pairs and the pair-identity search of remap_pair_data.
+//
+// It finds the same pairs as CellGrid.build, pair for pair, and writes them in the canonical
+// order of sort_pairs (by i (N+1) + j, padding N last), so that a run is the same bit for bit
+// whichever of the two builds it. The same arithmetic in the same order as the JAX build:
+//  * cell of a particle: floor(x_a / size_a) per axis in the dtype of the positions, clipped to
+//    [0, cells_a) (wrapped along a periodic last axis); the flat cell c_0 + c_1 n_0 + c_2 n_0 n_1;
+//  * visited cells: offsets -1, 0, 1 along axes of three or more cells (0 along the others),
+//    wrapped modulo the cells of each axis (CellGrid.shifts / visit);
+//  * a pair (i, j), i < j, is listed when |d|^2 < cutoff^2, d = x_j - x_i with the minimum image
+//    dz - L rint(dz / L) along a periodic last axis, |d|^2 = (d_0^2 + d_1^2) + d_2^2, all in the
+//    dtype of the positions;
+//  * cell capacity: CellGrid.visit sees only the first `cap` particles (by index) of each cell
+//    as the smaller partner; so here: a pair is listed only if its smaller index is among the
+//    first `cap` of its cell. More than `cap` in a cell is flagged by the caller (fullest > cap)
+//    and the chunk redone, as with the JAX build.
+// Beyond the capacity M of the output the pairs are counted (total) but not written; the caller
+// flags that overflow, and the list is not used.
+//
+// Inputs: 0 box-frame positions (N, D) f32 or f64; 1 the old pairs (2, M_old) s32 (padding N).
+// Attributes: n0, n1, n2 cells per axis (n2 = 1 in 2D); s0, s1, s2 their sides (m); cut2 the
+// squared cutoff; L the period of the last axis (0: none); cap the cell capacity.
+// Outputs: 0 pairs (2, M) s32 in canonical order, padded with N; 1 for each new slot the old
+// slot of the same pair, or -1 (new pair, padding); 2 pairs found (1) s32; 3 the most particles
+// in one cell (1) s32.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+#include "xla/ffi/api/ffi.h"
+namespace ffi = xla::ffi;
+
+namespace {
+
+// floor(x / size) as XLA converts it to s32 (saturating, NaN -> 0), then clipped or wrapped
+template <typename S>
+inline int64_t cell_of(S x, S size, int64_t cells, bool wrap) {
+  const S f = std::floor(x / size);
+  int64_t c;
+  if (!(f == f)) c = 0;
+  else if (f >= S(2147483647.0)) c = 2147483647;
+  else if (f <= S(-2147483648.0)) c = -2147483648LL;
+  else c = static_cast<int64_t>(f);
+  if (wrap) return ((c % cells) + cells) % cells;
+  return c < 0 ? 0 : (c >= cells ? cells - 1 : c);
+}
+
+struct Grid {
+  int64_t cells[3];
+  double size[3];
+  double cut2, L;
+  int64_t cap;
+};
+
+template <typename S, int D>
+void build(const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m, int64_t* total,
+           int64_t* fullest) {
+  const int64_t nc = g.cells[0] * g.cells[1] * g.cells[2];
+  const bool periodic = g.L > 0;
+  const S size[3] = {S(g.size[0]), S(g.size[1]), S(g.size[2])};
+  const S cut2 = S(g.cut2), L = S(g.L);
+  std::vector<int64_t> coord(static_cast<size_t>(3 * n), 0), key(n), count(nc + 1, 0);
+  for (int64_t p = 0; p < n; ++p) {
+    int64_t k = 0, mult = 1;
+    for (int a = 0; a < D; ++a) {
+      const int64_t c = cell_of<S>(x[D*p + a], size[a], g.cells[a], periodic && a == D - 1);
+      coord[3*p + a] = c;
+      k += c * mult;
+      mult *= g.cells[a];
+    }
+    key[p] = k;
+    ++count[k + 1];
+  }
+  *fullest = 0;
+  for (int64_t c = 0; c < nc; ++c) *fullest = std::max(*fullest, count[c + 1]);
+  for (int64_t c = 0; c < nc; ++c) count[c + 1] += count[c];  // now the start of each cell
+  std::vector<int32_t> order(n);
+  std::vector<int64_t> fill(count.begin(), count.end() - 1), rank(n);
+  for (int64_t p = 0; p < n; ++p) {  // stable: by index within a cell, as argsort(key)
+    rank[p] = fill[key[p]] - count[key[p]];
+    order[fill[key[p]]++] = static_cast<int32_t>(p);
+  }
+  // the visited offsets (CellGrid.shifts)
+  std::vector<int64_t> shifts;
+  for (int64_t a0 = -1; a0 <= 1; ++a0)
+    for (int64_t a1 = -1; a1 <= 1; ++a1)
+      for (int64_t a2 = -1; a2 <= 1; ++a2) {
+        const int64_t s[3] = {a0, a1, a2};
+        bool ok = true;
+        for (int a = 0; a < 3; ++a)
+          if (s[a] != 0 && (a >= D || g.cells[a] < 3)) ok = false;
+        if (ok) shifts.insert(shifts.end(), s, s + 3);
+      }
+  const int64_t ns = static_cast<int64_t>(shifts.size() / 3);
+  std::vector<int32_t> cand;
+  int64_t t = 0;
+  for (int64_t i = 0; i < n; ++i) {
+    if (rank[i] >= g.cap) continue;  // not seen as the smaller partner (cell overflow)
+    cand.clear();
+    for (int64_t q = 0; q < ns; ++q) {
+      int64_t k = 0, mult = 1;
+      for (int a = 0; a < D; ++a) {
+        const int64_t c = ((coord[3*i + a] + shifts[3*q + a]) % g.cells[a] + g.cells[a]) %
+                          g.cells[a];
+        k += c * mult;
+        mult *= g.cells[a];
+      }
+      for (int64_t u = count[k]; u < count[k + 1]; ++u) {
+        const int32_t j = order[u];
+        if (j <= i) continue;
+        S d[D];
+        for (int a = 0; a < D; ++a) d[a] = x[D*j + a] - x[D*i + a];
+        if (D == 3 && periodic) d[D - 1] = d[D - 1] - L * std::nearbyint(d[D - 1] / L);
+        S r2 = d[0]*d[0] + d[1]*d[1];
+        if (D == 3) r2 = r2 + d[2]*d[2];
+        if (r2 < cut2) cand.push_back(j);
+      }
+    }
+    std::sort(cand.begin(), cand.end());
+    for (const int32_t j : cand) {
+      if (t < m) { out[t] = static_cast<int32_t>(i); out[m + t] = j; }
+      ++t;
+    }
+  }
+  for (int64_t k = t; k < m; ++k) out[k] = out[m + k] = static_cast<int32_t>(n);  // padding
+  *total = t;
+}
+
+// for each new slot, the old slot of the same pair or -1 (remap_pair_data's search)
+void sources(const int32_t* old, int64_t mo, const int32_t* nw, int64_t m, int64_t n,
+             int32_t* src) {
+  auto key = [n](int32_t i, int32_t j) { return static_cast<int64_t>(i) * (n + 1) + j; };
+  std::vector<int64_t> ko(mo);
+  bool sorted = true;
+  for (int64_t k = 0; k < mo; ++k) {
+    ko[k] = key(old[k], old[mo + k]);
+    if (k > 0 && ko[k] < ko[k - 1]) sorted = false;
+  }
+  std::vector<int32_t> perm(mo);
+  for (int64_t k = 0; k < mo; ++k) perm[k] = static_cast<int32_t>(k);
+  if (!sorted)  // a list not in canonical order (not made here): sort its keys first
+    std::stable_sort(perm.begin(), perm.end(), [&](int32_t a, int32_t b) { return ko[a] < ko[b]; });
+  int64_t u = 0;
+  for (int64_t k = 0; k < m; ++k) {
+    src[k] = -1;
+    if (nw[k] >= n) continue;
+    const int64_t kn = key(nw[k], nw[m + k]);
+    if (k > 0 && kn < key(nw[k - 1], nw[m + k - 1])) u = 0;  // (never: the new list is sorted)
+    while (u < mo && ko[perm[u]] < kn) ++u;
+    if (u < mo && ko[perm[u]] == kn) src[k] = perm[u];
+  }
+}
+
+}  // namespace
+
+static ffi::Error NeighborsImpl(ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, int64_t n0,
+                                int64_t n1, int64_t n2, double s0, double s1, double s2,
+                                double cut2, double L, int64_t cap,
+                                ffi::ResultBuffer<ffi::S32> pairs,
+                                ffi::ResultBuffer<ffi::S32> src,
+                                ffi::ResultBuffer<ffi::S32> total,
+                                ffi::ResultBuffer<ffi::S32> fullest) {
+  const auto pd = pos.dimensions();
+  if (pd.size() != 2 || (pd[1] != 2 && pd[1] != 3))
+    return ffi::Error::InvalidArgument("drumheat_neighbors: positions must be (N, 2) or (N, 3)");
+  const int64_t n = pd[0], m = pairs->dimensions()[1], mo = old.dimensions()[1];
+  if (n0 < 1 || n1 < 1 || n2 < 1)
+    return ffi::Error::InvalidArgument("drumheat_neighbors: cells per axis must be positive");
+  const Grid g{{n0, n1, n2}, {s0, s1, s2}, cut2, L, cap};
+  int64_t t = 0, f = 0;
+  int32_t* out = pairs->typed_data();
+  const bool f64 = pos.element_type() == ffi::DataType::F64;
+  if (!f64 && pos.element_type() != ffi::DataType::F32)
+    return ffi::Error::InvalidArgument("drumheat_neighbors: positions must be f32 or f64");
+  if (pd[1] == 3) {
+    if (f64) build<double, 3>(static_cast<const double*>(pos.untyped_data()), n, g, out, m, &t, &f);
+    else build<float, 3>(static_cast<const float*>(pos.untyped_data()), n, g, out, m, &t, &f);
+  } else {
+    if (f64) build<double, 2>(static_cast<const double*>(pos.untyped_data()), n, g, out, m, &t, &f);
+    else build<float, 2>(static_cast<const float*>(pos.untyped_data()), n, g, out, m, &t, &f);
+  }
+  sources(old.typed_data(), mo, out, m, n, src->typed_data());
+  const int64_t big = std::numeric_limits<int32_t>::max();
+  total->typed_data()[0] = static_cast<int32_t>(std::min(t, big));
+  fullest->typed_data()[0] = static_cast<int32_t>(std::min(f, big));
+  return ffi::Error::Success();
+}
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(
+    Neighbors, NeighborsImpl,
+    ffi::Ffi::Bind()
+        .Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
+        .Attr<int64_t>("n0").Attr<int64_t>("n1").Attr<int64_t>("n2")
+        .Attr<double>("s0").Attr<double>("s1").Attr<double>("s2")
+        .Attr<double>("cut2").Attr<double>("L").Attr<int64_t>("cap")
+        .Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>()
+        .Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>());

@@ -1,0 +1,133 @@
+"""The C++ neighbour rebuild (NeighborSetup(builder="cpu"), drumheat.mechanics.cpu_kernel.
+neighbor_pairs) against the JAX cell list: the same pairs in the same order, the same sources of
+the carried pair data, the same overflow flags, and runs equal bit for bit; and the C++ contact
+loop's conduction mask against ContactForces.pair_gap_mask."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import drumheat  # noqa: F401  (x64)
+from drumheat.geometry import DrumShell
+from drumheat.mechanics import contact_params, cpu_kernel, make_dem, make_particles
+from drumheat.mechanics.neighbors import PEC, make_neighbor_setup, remap_pair_data
+
+pytestmark = [pytest.mark.skipif(not cpu_kernel.available()[0],
+                                 reason=f"C++ kernel unavailable: {cpu_kernel.available()[1]}"),
+              pytest.mark.filterwarnings("ignore::drumheat.mechanics.DEMAccuracyWarning")]
+
+
+def _setups(dim, periodic, lo, hi, cutoff=0.02):
+    return [make_neighbor_setup(dim, lo, hi, cutoff, 0.004, periodic, builder=b)
+            for b in ("jax", "cpu")]
+
+
+def _both(setups, pos, nbrs):
+    return [jax.jit(s.rebuild_with_sources)(pos, nbrs) for s in setups]
+
+
+@pytest.mark.parametrize("dim,periodic,dtype,spread", [
+    (2, None, np.float32, 1.0), (3, None, np.float64, 1.0), (3, 0.12, np.float32, 1.0),
+    (3, 0.12, np.float64, 1.0), (3, None, np.float64, 1.6), (2, None, np.float64, 1.6)])
+def test_same_pairs_order_and_sources(dim, periodic, dtype, spread):
+    """Random particles (``spread`` > 1: some outside the box, clipped into its edge cells),
+    rebuilt after a move: pairs, order, the old slot of every pair, flags, all equal."""
+    rng = np.random.default_rng(dim + 10 * (periodic is not None) + int(spread * 10))
+    n = 2500
+    lo, hi = np.full(dim, -0.15), np.full(dim, 0.15)
+    if periodic:
+        lo[-1], hi[-1] = 0.0, periodic
+    pos = jnp.asarray(rng.uniform(lo, hi, (n, dim)), dtype)
+    jx, cp = _setups(dim, periodic, lo, hi)
+    nbrs = jx.allocate(pos, min_cell_capacity=40)
+    moved = pos * spread + jnp.asarray(rng.normal(0.0, 0.003, (n, dim)), dtype)
+    if periodic:
+        moved = moved.at[:, -1].set(jnp.mod(moved[:, -1], periodic))
+    (a, sa), (b, sb) = _both((jx, cp), moved, nbrs)
+    # (spread out, the clipped edge cells may overflow: flagged alike, the same pairs seen)
+    assert int(a.error.code) == int(b.error.code) == (int(a.error.code) if spread > 1 else 0)
+    assert int(jnp.sum(b.idx[0] < n)) > 300  # a real list
+    np.testing.assert_array_equal(np.asarray(a.idx), np.asarray(b.idx))
+    np.testing.assert_array_equal(np.asarray(sa), np.asarray(sb))
+    assert int(jnp.sum(sb >= 0)) > 0.3 * int(jnp.sum(b.idx[0] < n))  # pairs carried over
+    np.testing.assert_array_equal(np.asarray(a.reference_position),
+                                  np.asarray(b.reference_position))
+    # the data carried as remap_pair_data carries it
+    data = jnp.arange(nbrs.idx.shape[1], dtype=jnp.float64) + 1.0
+    np.testing.assert_array_equal(np.asarray(remap_pair_data(nbrs.idx, data, b.idx, n)),
+                                  np.where(np.asarray(sb) >= 0, np.asarray(sb) + 1.0, 0.0))
+
+
+def test_overflows_are_flagged_alike():
+    """A crowded cell and too many pairs: the same flags; the pairs written are genuine."""
+    rng = np.random.default_rng(4)
+    lo, hi = np.zeros(3), np.full(3, 0.2)
+    jx, cp = _setups(3, None, lo, hi, 0.03)
+    pos = jnp.asarray(rng.uniform(lo, hi, (800, 3)))
+    nbrs = jx.allocate(pos)
+    (a, _), (b, _) = _both((jx, cp), pos * 0.2, nbrs)
+    code = int(b.error.code)
+    assert code == int(a.error.code)
+    assert code & PEC.NEIGHBOR_LIST_OVERFLOW and code & PEC.CELL_LIST_OVERFLOW
+    p = np.asarray(b.idx)
+    assert np.all(p[0] < 800) and np.all(p[0] < p[1])
+    x = np.asarray(pos * 0.2)
+    assert np.all(np.linalg.norm(x[p[0]] - x[p[1]], axis=1) < cp.cutoff)
+    # only the cell capacity exceeded (pair buffer large): the same list as the JAX build,
+    # which sees only the first particles of a crowded cell
+    big = jx.allocate(pos * 0.2, min_cell_capacity=1)
+    few = jax.tree_util.tree_map(lambda v: v, big)
+    import dataclasses
+    few = dataclasses.replace(few, cell_list_capacity=max(1, big.cell_list_capacity // 3))
+    (a, sa), (b, sb) = _both((jx, cp), pos * 0.2, few)
+    assert int(a.error.code) == int(b.error.code) == PEC.CELL_LIST_OVERFLOW
+    np.testing.assert_array_equal(np.asarray(a.idx), np.asarray(b.idx))
+    np.testing.assert_array_equal(np.asarray(sa), np.asarray(sb))
+
+
+def _drum(builder, dtype, gap=0.0):
+    """A periodic slice of a turning drum with 600 spheres dropped in, a thin skin (a rebuild
+    every few steps)."""
+    rng = np.random.default_rng(7)
+    R, L, r = 0.05, 0.02, 0.002
+    g = np.arange(-R + 2 * r, R - 2 * r, 2.05 * r)
+    pts = np.stack(np.meshgrid(g, g, np.arange(r, L - r, 2.05 * r), indexing="ij"), -1)
+    pts = pts.reshape(-1, 3)
+    pts = pts[np.hypot(pts[:, 0], pts[:, 1]) < R - 1.5 * r][:600]
+    radius = r * rng.uniform(0.9, 1.0, len(pts))
+    part = make_particles(radius, 2500.0)
+    params = contact_params(1e5, restitution=0.5, friction=0.5, wall_friction=0.5)
+    dem = make_dem(part, [DrumShell(R, rpm=30.0)], params, dim=3, periodic_length=L,
+                   skin=0.0002, dtype=dtype, pair_kernel="cpu", neighbor_builder=builder,
+                   conduction_gap=(gap, gap))
+    vel = rng.normal(0.0, 0.5, pts.shape)
+    return dem, dem.init(jnp.asarray(pts, dtype), velocity=jnp.asarray(vel, dtype))
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_run_is_the_same_bit_for_bit(dtype):
+    """300 steps with the C++ contact loop and either neighbour build: the same state, bit for
+    bit, through many rebuilds (springs carried by either)."""
+    dj, st = _drum("jax", dtype)
+    dc, _ = _drum("cpu", dtype)
+    assert dj.neighbor.builder == "jax" and dc.neighbor.builder == "cpu"
+    a = dj.run(st, 300, chunk=150)
+    b = dc.run(st, 300, chunk=150)
+    assert int(a.n_rebuilds) == int(b.n_rebuilds) > 5
+    assert int(jnp.sum(jnp.any(a.pair_spring != 0, -1))) > 10  # contacts with history
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+def test_kernel_conduction_mask_is_pair_gap_mask():
+    """The C++ loop's pairs within the conduction gap are pair_gap_mask's, pair for pair."""
+    dem, st = _drum("cpu", jnp.float64, gap=0.05)
+    st = dem.run(st, 200, chunk=200)
+    forces = dem._forces.__wrapped__
+    r = dem._forces(st.position, st.velocity, st.angular_velocity, st.time, st.nbrs,
+                    st.pair_spring, st.wall_spring)
+    ref = jax.jit(forces.pair_gap_mask)(st.position, st.nbrs.idx[0], st.nbrs.idx[1])
+    got = r[4].pair_conducts
+    assert int(jnp.sum(got)) > int(jnp.sum(r[4].pair_mask)) > 10  # gaps conduct too
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(ref))
