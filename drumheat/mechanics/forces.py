@@ -211,7 +211,12 @@ class ContactForces:
         d = self.displacement(pos[jj], pos[ii])
         dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
         ri, rj = self.radius[ii], self.radius[jj]
-        return valid & (ri + rj - dist >= -self.gap_pp * 2.0 * jnp.minimum(ri, rj))
+        return self.within_gap(valid, ri + rj - dist, ri, rj)
+
+    def within_gap(self, valid, overlap, ri, rj):
+        """Pairs whose ``overlap`` (negative: a gap) is at least ``-conduction_gap`` times the
+        smaller diameter: the pairs that conduct."""
+        return valid & (overlap >= -self.gap_pp * 2.0 * jnp.minimum(ri, rj))
 
     def wall_gap_mask(self, wd, w_mask):
         """Particle-wall slots within the conduction gap, flattened like ``wall_mask``."""
@@ -279,7 +284,7 @@ class JaxContactForces(ContactForces):
         p_cond = active
         if gap_pp > 0:
             r_i, r_j = radius[jnp.where(i < n, i, 0)], radius[jnp.where(j < n, j, 0)]
-            p_cond = (i < n) & (ovl >= -gap_pp * 2.0 * jnp.minimum(r_i, r_j))
+            p_cond = self.within_gap(i < n, ovl, r_i, r_j)
         ovl = jnp.where(active, ovl, 0.0)
         dist = jnp.where(active, dist, 0.0)
         force, torque, new_wall_spring, max_ovl, slots, wd, wall_work = self._walls(

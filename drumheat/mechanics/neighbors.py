@@ -60,7 +60,6 @@ __all__ = [
     "remap_pair_data",
     "pair_sources",
     "take_pair_data",
-    "pair_keys",
     "sort_pairs",
 ]
 
@@ -86,20 +85,6 @@ def make_displacement(dim: int, periodic_length: Optional[float] = None) -> Call
         return dR.at[..., -1].set(dz)
 
     return displacement
-
-
-def pair_keys(idx, n):
-    """Integer key ``i (N+1) + j`` of each column of an OrderedSparse ``idx``; padding is large.
-
-    Uses int64 when x64 is enabled (drumheat enables it), else int32 (N up to 46340).
-    """
-    use64 = jax.config.jax_enable_x64
-    dt = jnp.int64 if use64 else jnp.int32
-    if not use64 and (n + 1) * (n + 1) >= 2**31:
-        raise ValueError("pair keys need int64 for this N: enable jax_enable_x64")
-    i = idx[0].astype(dt)
-    j = idx[1].astype(dt)
-    return i * (n + 1) + j
 
 
 def pair_sources(old_idx, new_idx, n, old_sorted: bool = False):
@@ -172,7 +157,7 @@ def remap_pair_data(old_idx, old_data, new_idx, n, old_sorted: bool = False):
 
 
 def sort_pairs(nbrs, n):
-    """The neighbour list with its pairs in canonical order (by ``i (N+1) + j``, padding last).
+    """The neighbour list with its pairs in canonical order (by ``(i, j)``, padding last).
 
     A canonical order makes the force sums (``segment_sum`` over the pairs) independent of when
     the list was built: a run that rebuilds every step and one that rebuilds rarely add the
