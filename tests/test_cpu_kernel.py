@@ -247,6 +247,34 @@ def test_threaded_kernel_equals_one_thread(monkeypatch):
     _close(a[6], b[6], 1e-9, "heat flow")
 
 
+@needs_kernel
+def test_any_order_of_the_pair_slots(monkeypatch):
+    """The loop takes the pairs in any order: a list not sorted by the first particle, its
+    padding slots spread among the pairs (the scan finds them one by one instead of at the
+    list's end), gives each slot the same outputs as the sorted list, bit for bit, and the same
+    forces and heat flows to round-off (the sums run in another order); also in three chunks."""
+    import dataclasses
+
+    jdem, st = _bed(3, jnp.float64, "jax", "overlap", 0.05)
+    cdem = _bed(3, jnp.float64, "cpu", "overlap", 0.05)[0]
+    perm = np.random.default_rng(3).permutation(st.nbrs.idx.shape[1])
+    assert np.any(np.diff(np.asarray(st.nbrs.idx[0])[perm]) < 0)  # not sorted by i
+    shuffled = st._replace(nbrs=dataclasses.replace(st.nbrs, idx=st.nbrs.idx[:, perm]),
+                           pair_spring=st.pair_spring[perm])
+    for threads in ("1", "3"):
+        monkeypatch.setenv("DRUMHEAT_KERNEL_THREADS", threads)
+        a, b = _forces(cdem, st), _forces(cdem, shuffled)
+        np.testing.assert_array_equal(np.asarray(a[2])[perm], np.asarray(b[2]))  # springs
+        for f in ("pair_mask", "pair_overlap", "pair_distance", "pair_normal_force",
+                  "pair_conducts"):
+            np.testing.assert_array_equal(np.asarray(getattr(a[4], f))[perm],
+                                          np.asarray(getattr(b[4], f)), f)
+        np.testing.assert_array_equal(np.asarray(a[3]), np.asarray(b[3]))  # wall springs
+        _close(a[0], b[0], REL[jnp.float64], "force")
+        _close(a[1], b[1], REL[jnp.float64], "torque")
+        _close(a[6], b[6], REL[jnp.float64], "heat flow")
+
+
 def test_gap_tolerance_of_the_jax_heat_flow():
     """Three spheres in a row: 0-1 overlap, 1-2 have a gap of 3 % of d, 0-2 are far apart.
     With tolerance 0 only 0-1 conducts; with 0.05 also 1-2 ("projected"); the "overlap" law

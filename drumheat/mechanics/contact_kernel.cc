@@ -76,8 +76,9 @@
 // Threads: the particles are cut into C equal ranges, C = the threads of XLA's intra-op pool, at
 // most one per MIN_CHUNK listed pairs (DRUMHEAT_KERNEL_THREADS sets C); chunk c takes the pair
 // slots whose first particle i lies in range c (the pairs come sorted by i, padding last, as
-// neighbors.sort_pairs leaves them; a list not so sorted is cut into C equal runs of slots) and
-// the wall slots of those particles. Cut by particles, the chunks share the work evenly however
+// neighbors.sort_pairs leaves them; a list not so sorted is cut into C equal runs of slots),
+// the wall slots of those particles and an equal share of the padding slots (whose outputs are
+// only zeroed). Cut by particles, the chunks share the work evenly however
 // many padding slots the list has (cut by slots, the first chunk took nearly all the pairs of a
 // list half padding), and each pair's chunk does not depend on the capacity or the skin of the
 // list. Both passes (Contacts and ContactHeat) cut their chunks so. The calling thread runs
@@ -246,6 +247,22 @@ inline void clear(S* s) {
     for (int c = 0; c < D; ++c) s[c] = S(0);
 }
 
+// clear<S, D>(s) unless `keep`, with one branch that is almost never taken (a spring that is
+// not zero where its pair is out of reach: a contact that has just opened far), so that it
+// costs no misprediction where `keep` varies from slot to slot
+template <typename S, int D>
+inline void clear_unless(S* s, bool keep) {
+  using U = std::conditional_t<sizeof(S) == 8, uint64_t, uint32_t>;
+  U bits = 0;
+  for (int c = 0; c < D; ++c) {
+    U u;
+    std::memcpy(&u, s + c, sizeof(S));
+    bits |= u;
+  }
+  if ((bits != 0) & !keep)
+    for (int c = 0; c < D; ++c) s[c] = S(0);
+}
+
 // conductance of a conducting pair at centre distance L (see the header), W/K
 inline double conductance(int law, double h, double ri, double rj, double L) {
   if (law == 0) {
@@ -299,18 +316,21 @@ void help(const std::shared_ptr<Job>& job) {
   job->active.fetch_sub(1);
 }
 
-// The chunks of a call (see the header): chunk c takes the pair slots [kb[c], kb[c + 1]) and
-// the wall slots of the particles [n c / nc, n (c + 1) / nc)
+// The chunks of a call (see the header): chunk c takes the pair slots [kb[c], kb[c + 1]), the
+// padding slots [pb[c], pb[c + 1]) (an equal share of the slots past the listed pairs of a
+// list sorted by i: they only need their outputs zeroed, which would otherwise fall on the
+// last chunk alone) and the wall slots of the particles [n c / nc, n (c + 1) / nc)
 struct Chunks {
   int64_t n, nw, nc;
-  std::vector<int64_t> kb;
+  std::vector<int64_t> kb, pb;
   int64_t s0(int64_t c) const { return n * c / nc * nw; }  // the first wall slot of chunk c
   int64_t s1(int64_t c) const { return n * (c + 1) / nc * nw; }  // past its last
 };
 
 // the chunks for the pairs P (2, M) of n particles with nw walls: C from the listed pairs (the
 // slots before the padding i = n when the list is sorted by i), the pair slots cut where the
-// particle ranges begin (equal runs of slots if the list is not sorted by i)
+// particle ranges begin (equal runs of slots if the list is not sorted by i: the padding is
+// then found slot by slot)
 Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int64_t nw) {
   const bool by_particle = std::is_sorted(P, P + m);
   const int64_t listed =
@@ -320,10 +340,12 @@ Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int
   if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nc = std::atoi(e);  // exactly
   if (nc > n) nc = n;
   if (nc < 1) nc = 1;
-  Chunks ch{n, nw, nc, std::vector<int64_t>(nc + 1, m)};
-  for (int64_t c = 0; c < nc; ++c)
+  Chunks ch{n, nw, nc, std::vector<int64_t>(nc + 1, listed), std::vector<int64_t>(nc + 1, m)};
+  for (int64_t c = 0; c < nc; ++c) {
     ch.kb[c] = by_particle ? std::lower_bound(P, P + m, static_cast<int32_t>(n * c / nc)) - P
                            : m * c / nc;
+    ch.pb[c] = listed + (m - listed) * c / nc;
+  }
   return ch;
 }
 
@@ -427,44 +449,114 @@ struct Loop {
     roll_pw = roll_pw && rot;
   }
 
-  S pairs(int64_t k0, int64_t k1, S* F, S* T, double* Q, double* R) const {
-    S max_ov = S(0);
-  for (int64_t k = k0; k < k1; ++k) {
-    const int32_t i = P[k], j = P[m + k];
-    S* s = Sn + D*k;
-    const S* so = sp + D*k;
-    S* hw = fh ? PW + KP*k : nullptr;  // friction heat row (header)
-    // zero where nothing touches (written here, while the line is at hand: a sweep over the
-    // whole output first would pass it through the cache twice where it does not fit)
-    if (fh) for (int c = 0; c < KP; ++c) hw[c] = S(0);
-    OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
-    if (i >= n) { clear<S, D>(s); continue; }
-    S d[D];  // from i to j
-    for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
+  // The geometry of pair slot k (a listed pair, i < n): the partners, the vector d from i to
+  // j (the nearest periodic image of the last axis), |d|^2 and the radii
+  struct Slot {
+    int32_t i, j;
+    S d[D], dist2, ri, rj, rs, rmin;
+  };
+
+  Slot slot(int64_t k) const {
+    Slot g;
+    g.i = P[k]; g.j = P[m + k];
+    for (int c = 0; c < D; ++c) g.d[c] = x[D*g.j + c] - x[D*g.i + c];
     // nearest periodic image of the last axis (positions are kept in [0, L), so |d| < L);
     // the same as d - L rint(d / L), without a libm call per slot
     if constexpr (D == 3)
-      if (L > S(0)) d[2] = d[2] > S(0.5)*L ? d[2] - L : (d[2] < S(-0.5)*L ? d[2] + L : d[2]);
-    const S dist2 = dot<S, D>(d, d);
-    const S ri = r[i], rj = r[j];
-    const S rs = ri + rj;
-    const S rmin = ri < rj ? ri : rj;
-    const Law<S>& law = one_type ? pp[0] : pp[pt[i]*nt + pt[j]];
-    // friction heat: the springs' energy before the step (read before the spring is written)
-    const S xi2 = fh ? dot<S, D>(so, so) : S(0);
-    const S ov0 = fh ? overlap_before<S, D>(x + D*i, x + D*j, v + D*i, v + D*j, rs, dt, L)
-                     : S(0);
+      if (L > S(0))
+        g.d[2] = g.d[2] > S(0.5)*L ? g.d[2] - L : (g.d[2] < S(-0.5)*L ? g.d[2] + L : g.d[2]);
+    g.dist2 = dot<S, D>(g.d, g.d);
+    g.ri = r[g.i]; g.rj = r[g.j];
+    g.rs = g.ri + g.rj;
+    g.rmin = g.ri < g.rj ? g.ri : g.rj;
+    return g;
+  }
+
+  // the bound on |d| beyond which a pair can neither touch, conduct across the gap nor count
+  // in output 11: the exact tests in `pair` (on the overlap, as the JAX kernel decides) cannot
+  // pass beyond it
+  S reach(const Slot& g) const {
+    const S gap = gap_on ? tol*(S(2)*g.rmin) : S(0);
+    const S cg = cgap*(S(2)*g.rmin);
+    return g.rs + (gap > cg ? gap : cg);
+  }
+
+  const Law<S>& pair_law(const Slot& g) const {
+    return one_type ? pp[0] : pp[pt[g.i]*nt + pt[g.j]];
+  }
+
+  // friction heat: the springs' energy before the step, |xi_old|^2 and the overlap before the
+  // step's drift (read before the spring is written)
+  S spring2(int64_t k) const { return fh ? dot<S, D>(sp + D*k, sp + D*k) : S(0); }
+  S overlap0(const Slot& g) const {
+    return fh ? overlap_before<S, D>(x + D*g.i, x + D*g.j, v + D*g.i, v + D*g.j, g.rs, dt, L)
+              : S(0);
+  }
+
+  // padding slots [p0, p1) (past the listed pairs): the outputs of a pair that does not touch
+  void padding(int64_t p0, int64_t p1) const {
+    for (int64_t k = p0; k < p1; ++k) {
+      if (fh) for (int c = 0; c < KP; ++c) PW[KP*k + c] = S(0);
+      OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
+      clear<S, D>(Sn + D*k);
+    }
+  }
+
+  // The pair slots [k0, k1) in blocks of BLOCK slots, two passes per block. The scan writes
+  // every slot's outputs as for a pair that does not touch (zeros, the spring cleared, with
+  // friction heat the opened contact's row) and collects the slots within reach; `pair` then
+  // computes those. Without friction heat the scan has no branch that depends on the geometry
+  // (a slot's index is written to the list and the count advanced by whether it is within
+  // reach), so the processor does not mispredict on the many listed pairs out of reach, and
+  // the list's slots are still in the cache when `pair` reads them.
+  static constexpr int64_t BLOCK = 256;
+
+  S pairs(int64_t k0, int64_t k1, S* F, S* T, double* Q, double* R) const {
+    S max_ov = S(0);
+    int64_t near[BLOCK];
+    for (int64_t b0 = k0; b0 < k1; b0 += BLOCK) {
+      const int64_t b1 = b0 + BLOCK < k1 ? b0 + BLOCK : k1;
+      int64_t cnt = 0;
+      for (int64_t k = b0; k < b1; ++k) {
+        S* s = Sn + D*k;
+        // zero where nothing touches (written here, while the line is at hand: a sweep over
+        // the whole output first would pass it through the cache twice where it does not fit)
+        if (fh) for (int c = 0; c < KP; ++c) PW[KP*k + c] = S(0);
+        OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
+        if (P[k] >= n) { clear<S, D>(s); continue; }  // padding (in a list not sorted by i)
+        const Slot g = slot(k);
+        const S re = reach(g);
+        const bool within = !(g.dist2 > re*re*S(1.0001));
+        near[cnt] = k;
+        cnt += within;
+        if (fh && !within)
+          opened<S>(pair_law(g), overlap0(g), spring2(k), PW + KP*k + KP - 1, R);
+        clear_unless<S, D>(s, within);
+      }
+      for (int64_t q = 0; q < cnt; ++q) {
+        const S ratio_ov = pair(near[q], F, T, Q, R);
+        if (ratio_ov > max_ov) max_ov = ratio_ov;
+      }
+    }
+    return max_ov;
+  }
+
+  // pair slot k within reach (the scan has written its outputs as for an open contact):
+  // returns overlap / smaller radius (0 where it does not touch)
+  S pair(int64_t k, S* F, S* T, double* Q, double* R) const {
+    const Slot g = slot(k);
+    const int32_t i = g.i, j = g.j;
+    const S* d = g.d;
+    const S dist2 = g.dist2, ri = g.ri, rj = g.rj, rs = g.rs, rmin = g.rmin;
+    S* s = Sn + D*k;
+    const S* so = sp + D*k;
+    S* hw = fh ? PW + KP*k : nullptr;  // friction heat row (header)
+    const Law<S>& law = pair_law(g);
+    const S xi2 = spring2(k);
+    const S ov0 = overlap0(g);
     // conduction across a gap of at most tol min(d_i, d_j)
     const S gap = gap_on ? tol*(S(2)*rmin) : S(0);
     const S cg = cgap*(S(2)*rmin);  // the gap of output 11
-    // a cheap test first: the exact one below (on the overlap, as the JAX kernel decides)
-    // cannot pass beyond this bound
-    const S reach = rs + (gap > cg ? gap : cg);
-    if (dist2 > reach*reach*S(1.0001)) {
-      if (fh) opened<S>(law, ov0, xi2, hw + KP - 1, R);
-      clear<S, D>(s);
-      continue;
-    }
     const S dist = std::sqrt(dist2);
     const S ov = rs - dist;
     CD[k] = cgap > S(0) ? ov >= -cg : ov > S(0);  // without a gap: while they overlap
@@ -475,7 +567,7 @@ struct Loop {
         const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
         Q[i] += q; Q[j] -= q;
       }
-      continue;
+      return S(0);
     }
     const S inv = dist > S(0) ? S(1) / dist : S(0);
     S nr[D], ai[D], aj[D], ci[D], cj[D], vr[D], f[D], M[DW] = {};
@@ -511,10 +603,7 @@ struct Loop {
       const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
       Q[i] += q; Q[j] -= q;
     }
-    const S ratio_ov = ov / rmin;
-    if (ratio_ov > max_ov) max_ov = ratio_ov;
-  }
-  return max_ov;
+    return ov / rmin;
   }
 
   // walls: partner A is the wall (spin omega_wall about z, infinite mass), B the particle
@@ -576,9 +665,10 @@ void run(ffi::ThreadPool& pool, const Call& a) {
   const Loop<S, D> lp(a);
   const int64_t n = a.n, m = a.m;
   const bool heat_on = lp.heat_on;
-  auto work = [&](int64_t k0, int64_t k1, int64_t s0, int64_t s1, S* F, S* T, double* Q,
-                  double* R) -> S {
-    const S p = lp.pairs(k0, k1, F, T, Q, R), q = lp.walls(s0, s1, F, T, R);
+  auto work = [&](const Chunks& ch, int64_t c, S* F, S* T, double* Q, double* R) -> S {
+    lp.padding(ch.pb[c], ch.pb[c + 1]);
+    const S p = lp.pairs(ch.kb[c], ch.kb[c + 1], F, T, Q, R);
+    const S q = lp.walls(ch.s0(c), ch.s1(c), F, T, R);
     return p > q ? p : q;
   };
 
@@ -608,7 +698,7 @@ void run(ffi::ThreadPool& pool, const Call& a) {
       std::memset(R, 0, sizeof(double) * 3);
       if (heat_on) std::memset(Q, 0, sizeof(double) * n);
     }
-    mx[c] = work(ch.kb[c], ch.kb[c + 1], ch.s0(c), ch.s1(c), F, T, Q, R);
+    mx[c] = work(ch, c, F, T, Q, R);
   });
   S max_ov = mx[0];
   for (int64_t c = 1; c < nc; ++c) {
