@@ -181,10 +181,11 @@ class PairCarried(eqx.Module):
 
     A state deriving from it names its per-pair arrays (:meth:`pair_arrays`: a PyTree whose
     leaves have a leading axis over the neighbour pairs, aligned with ``nbrs.idx``); the
-    integrator remaps them at every neighbour rebuild and reallocation exactly like the
-    tangential springs (pairs matched by identity, new pairs start at zero) and puts them back
-    with :meth:`with_pair_arrays`. The coupled heat model
-    (:class:`drumheat.motion.coupling.CoupledHeat`) keeps its contact-time accumulators so.
+    integrator remaps them at every neighbour rebuild and reallocation
+    (:meth:`remap_pair_arrays`: by default exactly like the tangential springs, pairs matched
+    by identity, new pairs start at zero) and puts them back with :meth:`with_pair_arrays`.
+    The coupled heat model (:class:`drumheat.motion.coupling.CoupledHeat`) keeps its
+    contact-time accumulators so.
     Any other ``extra`` (an array, a dict, None) is carried through the step unchanged.
     """
 
@@ -196,10 +197,24 @@ class PairCarried(eqx.Module):
     def with_pair_arrays(self, arrays) -> "PairCarried":
         """This state with its per-pair arrays replaced by ``arrays``."""
 
+    @staticmethod
+    def remap_pair_arrays(arrays, remap):
+        """The per-pair arrays ``arrays`` (:meth:`pair_arrays`) carried to a new neighbour
+        list; ``remap`` takes one array over the old pairs to the new pairs. By default every
+        leaf goes through ``remap``; a state may also book what the dropped pairs held (its
+        ``arrays`` may then hold other leaves too)."""
+        return jax.tree_util.tree_map(remap, arrays)
+
 
 def pair_extra(extra):
     """The per-pair arrays of a :class:`PairCarried` ``extra`` state, else None."""
     return extra.pair_arrays() if isinstance(extra, PairCarried) else None
+
+
+def remap_pair_extra(kind, pdata, remap):
+    """``pdata`` (:func:`pair_extra` of an ``extra`` of type ``kind``) carried to a new
+    neighbour list by ``remap`` (:meth:`PairCarried.remap_pair_arrays`); None stays None."""
+    return None if pdata is None else kind.remap_pair_arrays(pdata, remap)
 
 
 def _chunk_diagnostics(state, lo, hi, periodic_axis):
@@ -352,7 +367,7 @@ class DEM:
             state.nbrs.idx, a, new.idx, n, old_sorted=True)
         pdata = pair_extra(state.extra)
         extra = state.extra if pdata is None else state.extra.with_pair_arrays(
-            jax.tree_util.tree_map(remap, pdata))
+            remap_pair_extra(type(state.extra), pdata, remap))
         return state._replace(nbrs=new, pair_spring=remap(state.pair_spring), extra=extra)
 
     def run(self, state: DEMState, n_steps: int, chunk: Optional[int] = None,
@@ -514,11 +529,12 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     def _wrap(pos):
         return wrap_periodic_axis(pos, periodic_length, near=True)
 
-    def rebuild(args):
+    def rebuild(args, kind=None):
+        # kind: the type of the state's extra, which remaps pdata
         pos, nbrs, spring, count, pdata = args
         new, source = neighbor.rebuild_with_sources(pos, nbrs)
         remap = lambda a: take_pair_data(a, source)  # noqa: E731
-        return new, remap(spring), count + 1, jax.tree_util.tree_map(remap, pdata)
+        return new, remap(spring), count + 1, remap_pair_extra(kind, pdata, remap)
 
     def keep(args):
         pos, nbrs, spring, count, pdata = args
@@ -546,14 +562,15 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         extra = state.extra
         args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
         if always_rebuild or pairs == "rebuild":
-            nbrs, spring, count, pdata = rebuild(args)
+            nbrs, spring, count, pdata = rebuild(args, type(extra))
         elif pairs == "keep":
             nbrs, spring, count, pdata = keep(args)
         else:
             need = needs_rebuild(state, x)
             if batch_axis is not None:
                 need = jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
-            nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
+            nbrs, spring, count, pdata = jax.lax.cond(need, partial(rebuild, kind=type(extra)),
+                                                      keep, args)
         if pdata is not None:
             extra = extra.with_pair_arrays(pdata)
         f, tq, spring, wspring, contacts, ovl, heat, work = forces(
