@@ -540,14 +540,20 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         pos, nbrs, spring, count, pdata = args
         return nbrs, spring, count, pdata
 
-    def drift(state: DEMState):
-        """First half-kick and drift: half-step velocities, spins and the new positions."""
+    def kick(state: DEMState):
+        """First half-kick: half-step velocities and spins."""
         v = state.velocity + half * state.force * inv_m[:, None]
         if rotation:
             tq = state.torque
             w = state.angular_velocity + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
         else:
             w = state.angular_velocity
+        return v, w
+
+    def drift(state: DEMState, kicked=None):
+        """First half-kick (``kicked`` if given) and drift: half-step velocities, spins and
+        the new positions."""
+        v, w = kick(state) if kicked is None else kicked
         return v, w, _wrap(state.position + dt * v)
 
     def needs_rebuild(state: DEMState, x):
@@ -630,16 +636,18 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
         the trajectory, are those of :func:`step`.
         """
-        # the carry holds the coming step's drift, computed once: the loop condition tests it
-        # against the skin and the step goes on from it
+        # the carry holds the coming step's half-kick, computed once; its positions are
+        # computed twice (the same values), in the loop condition, which tests them against
+        # the skin, and in the step: carried, they made XLA copy them every step (from the
+        # carry's drift into the state)
         def advance(c, pairs):
-            st, k, d = c
-            new = step(st, pairs, d)[0]
-            return new, k + 1, drift(new)
+            st, k, kicked = c
+            new = step(st, pairs, drift(st, kicked))[0]
+            return new, k + 1, kick(new)
 
         def go_on(c):
-            st, k, d = c
-            return (k < n_steps) & ~needs_rebuild(st, d[2])
+            st, k, kicked = c
+            return (k < n_steps) & ~needs_rebuild(st, drift(st, kicked)[2])
 
         def segment(c):
             c = jax.lax.while_loop(go_on, lambda c: advance(c, "keep"), c)
@@ -647,7 +655,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
 
         k0 = jnp.zeros_like(jnp.asarray(n_steps))
         return jax.lax.while_loop(lambda c: c[1] < n_steps, segment,
-                                  (state, k0, drift(state)))[0]
+                                  (state, k0, kick(state)))[0]
 
     return step, run_steps, energies
 
