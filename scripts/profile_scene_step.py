@@ -40,7 +40,7 @@ import numpy as np
 
 import drumheat  # noqa: F401  (x64 for the temperatures)
 from machine import cpu_ticks, load, steal_percent  # noqa: E402  (scripts/machine.py)
-from drumheat.mechanics.integrator import JIT_OPTIONS, pair_extra
+from drumheat.mechanics.integrator import JIT_OPTIONS, pair_extra, remap_pair_extra
 from drumheat.mechanics.neighbors import remap_pair_data, sort_pairs, take_pair_data
 
 
@@ -93,8 +93,8 @@ def loops(dem):
         def rebuild(state):
             new, src = setup.rebuild_with_sources(state.position, state.nbrs)
             remap = lambda a: take_pair_data(a, src)  # noqa: E731
-            return new, remap(state.pair_spring), jax.tree_util.tree_map(remap, pair_extra(
-                state.extra))
+            return new, remap(state.pair_spring), remap_pair_extra(
+                type(state.extra), pair_extra(state.extra), remap)
         return rebuild
 
     def build_only(state):
@@ -106,7 +106,8 @@ def loops(dem):
 
     def remap_only(state):
         remap = lambda a: remap_pair_data(state.nbrs.idx, a, state.nbrs.idx, n)  # noqa: E731
-        return remap(state.pair_spring), jax.tree_util.tree_map(remap, pair_extra(state.extra))
+        return remap(state.pair_spring), remap_pair_extra(type(state.extra),
+                                                          pair_extra(state.extra), remap)
 
     jit = lambda f: jax.jit(f, compiler_options=JIT_OPTIONS)  # noqa: E731
     return dict(keep=jax.jit(keep_loop.__wrapped__, compiler_options=JIT_OPTIONS),

@@ -62,13 +62,15 @@ def rpm_to_omega(rpm):
     return 2.0 * math.pi * rpm / 60.0
 
 
-def _rot_velocity(omega, p):
-    """Velocity ``omega e_z x p`` of a point p (..., dim) of a body rotating about the z axis."""
+def _rot_velocity(omega, p, dim):
+    """Velocity ``omega e_z x p`` (..., dim) of a point p of a body rotating about the z axis;
+    only p's in-plane components (``p[..., :2]``) enter.
+
+    Built in one ``stack`` from the in-plane point (not from p embedded in 3D first): on
+    XLA:CPU the embedding was a pass of its own over (N, 3) per wall and step."""
     vx = -omega * p[..., 1]
     vy = omega * p[..., 0]
-    if p.shape[-1] == 2:
-        return jnp.stack([vx, vy], axis=-1)
-    return jnp.stack([vx, vy, jnp.zeros_like(vx)], axis=-1)
+    return jnp.stack([vx, vy] + [jnp.zeros_like(vx)] * (dim - 2), axis=-1)
 
 
 def _embed_xy(v_xy, dim):
@@ -136,7 +138,7 @@ class DrumShell(Wall):
         e_rho, rho = _safe_unit(x[..., :2])
         dist = self.radius - rho
         normal = _embed_xy(-e_rho, dim)
-        v = _rot_velocity(rpm_to_omega(self.rpm), self.radius * _embed_xy(e_rho, dim))
+        v = _rot_velocity(rpm_to_omega(self.rpm), self.radius * e_rho, dim)
         return dist, normal, v
 
     def bounds(self, dim):
@@ -168,9 +170,8 @@ class EndPlate(Wall):
         if x.shape[-1] != 3:
             raise ValueError("EndPlate exists only in 3D (dim = 3)")
         dist = self.side * (x[..., 2] - self.z0)
-        normal = jnp.zeros_like(x).at[..., 2].set(float(self.side))
-        p = x.at[..., 2].set(self.z0)
-        v = _rot_velocity(rpm_to_omega(self.rpm), p)
+        normal = jnp.broadcast_to(jnp.asarray([0.0, 0.0, float(self.side)], x.dtype), x.shape)
+        v = _rot_velocity(rpm_to_omega(self.rpm), x, 3)  # at (x, y, z0): the same
         return dist, normal, v
 
     def bounds(self, dim):
@@ -217,7 +218,7 @@ class RadialPlate(Wall):
         c = s[..., None] * e
         n_xy, r = _safe_unit(q - c)
         dist = r - 0.5 * self.thickness
-        v = _rot_velocity(rpm_to_omega(self.rpm), _embed_xy(c, dim))
+        v = _rot_velocity(rpm_to_omega(self.rpm), c, dim)
         return dist, _embed_xy(n_xy, dim), v
 
     def at_rest(self):
@@ -236,7 +237,7 @@ class InnerCylinder(Wall):
         dim = x.shape[-1]
         e_rho, rho = _safe_unit(x[..., :2])
         dist = rho - self.radius
-        v = _rot_velocity(rpm_to_omega(self.rpm), self.radius * _embed_xy(e_rho, dim))
+        v = _rot_velocity(rpm_to_omega(self.rpm), self.radius * e_rho, dim)
         return dist, _embed_xy(e_rho, dim), v
 
     def at_rest(self):

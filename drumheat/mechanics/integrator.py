@@ -181,10 +181,11 @@ class PairCarried(eqx.Module):
 
     A state deriving from it names its per-pair arrays (:meth:`pair_arrays`: a PyTree whose
     leaves have a leading axis over the neighbour pairs, aligned with ``nbrs.idx``); the
-    integrator remaps them at every neighbour rebuild and reallocation exactly like the
-    tangential springs (pairs matched by identity, new pairs start at zero) and puts them back
-    with :meth:`with_pair_arrays`. The coupled heat model
-    (:class:`drumheat.motion.coupling.CoupledHeat`) keeps its contact-time accumulators so.
+    integrator remaps them at every neighbour rebuild and reallocation
+    (:meth:`remap_pair_arrays`: by default exactly like the tangential springs, pairs matched
+    by identity, new pairs start at zero) and puts them back with :meth:`with_pair_arrays`.
+    The coupled heat model (:class:`drumheat.motion.coupling.CoupledHeat`) keeps its
+    contact-time accumulators so.
     Any other ``extra`` (an array, a dict, None) is carried through the step unchanged.
     """
 
@@ -196,10 +197,24 @@ class PairCarried(eqx.Module):
     def with_pair_arrays(self, arrays) -> "PairCarried":
         """This state with its per-pair arrays replaced by ``arrays``."""
 
+    @staticmethod
+    def remap_pair_arrays(arrays, remap):
+        """The per-pair arrays ``arrays`` (:meth:`pair_arrays`) carried to a new neighbour
+        list; ``remap`` takes one array over the old pairs to the new pairs. By default every
+        leaf goes through ``remap``; a state may also book what the dropped pairs held (its
+        ``arrays`` may then hold other leaves too)."""
+        return jax.tree_util.tree_map(remap, arrays)
+
 
 def pair_extra(extra):
     """The per-pair arrays of a :class:`PairCarried` ``extra`` state, else None."""
     return extra.pair_arrays() if isinstance(extra, PairCarried) else None
+
+
+def remap_pair_extra(kind, pdata, remap):
+    """``pdata`` (:func:`pair_extra` of an ``extra`` of type ``kind``) carried to a new
+    neighbour list by ``remap`` (:meth:`PairCarried.remap_pair_arrays`); None stays None."""
+    return None if pdata is None else kind.remap_pair_arrays(pdata, remap)
 
 
 def _chunk_diagnostics(state, lo, hi, periodic_axis):
@@ -352,7 +367,7 @@ class DEM:
             state.nbrs.idx, a, new.idx, n, old_sorted=True)
         pdata = pair_extra(state.extra)
         extra = state.extra if pdata is None else state.extra.with_pair_arrays(
-            jax.tree_util.tree_map(remap, pdata))
+            remap_pair_extra(type(state.extra), pdata, remap))
         return state._replace(nbrs=new, pair_spring=remap(state.pair_spring), extra=extra)
 
     def run(self, state: DEMState, n_steps: int, chunk: Optional[int] = None,
@@ -514,24 +529,31 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     def _wrap(pos):
         return wrap_periodic_axis(pos, periodic_length, near=True)
 
-    def rebuild(args):
+    def rebuild(args, kind=None):
+        # kind: the type of the state's extra, which remaps pdata
         pos, nbrs, spring, count, pdata = args
         new, source = neighbor.rebuild_with_sources(pos, nbrs)
         remap = lambda a: take_pair_data(a, source)  # noqa: E731
-        return new, remap(spring), count + 1, jax.tree_util.tree_map(remap, pdata)
+        return new, remap(spring), count + 1, remap_pair_extra(kind, pdata, remap)
 
     def keep(args):
         pos, nbrs, spring, count, pdata = args
         return nbrs, spring, count, pdata
 
-    def drift(state: DEMState):
-        """First half-kick and drift: half-step velocities, spins and the new positions."""
+    def kick(state: DEMState):
+        """First half-kick: half-step velocities and spins."""
         v = state.velocity + half * state.force * inv_m[:, None]
         if rotation:
             tq = state.torque
             w = state.angular_velocity + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
         else:
             w = state.angular_velocity
+        return v, w
+
+    def drift(state: DEMState, kicked=None):
+        """First half-kick (``kicked`` if given) and drift: half-step velocities, spins and
+        the new positions."""
+        v, w = kick(state) if kicked is None else kicked
         return v, w, _wrap(state.position + dt * v)
 
     def needs_rebuild(state: DEMState, x):
@@ -546,14 +568,15 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         extra = state.extra
         args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
         if always_rebuild or pairs == "rebuild":
-            nbrs, spring, count, pdata = rebuild(args)
+            nbrs, spring, count, pdata = rebuild(args, type(extra))
         elif pairs == "keep":
             nbrs, spring, count, pdata = keep(args)
         else:
             need = needs_rebuild(state, x)
             if batch_axis is not None:
                 need = jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
-            nbrs, spring, count, pdata = jax.lax.cond(need, rebuild, keep, args)
+            nbrs, spring, count, pdata = jax.lax.cond(need, partial(rebuild, kind=type(extra)),
+                                                      keep, args)
         if pdata is not None:
             extra = extra.with_pair_arrays(pdata)
         f, tq, spring, wspring, contacts, ovl, heat, work = forces(
@@ -613,16 +636,18 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
         the trajectory, are those of :func:`step`.
         """
-        # the carry holds the coming step's drift, computed once: the loop condition tests it
-        # against the skin and the step goes on from it
+        # the carry holds the coming step's half-kick, computed once; its positions are
+        # computed twice (the same values), in the loop condition, which tests them against
+        # the skin, and in the step: carried, they made XLA copy them every step (from the
+        # carry's drift into the state)
         def advance(c, pairs):
-            st, k, d = c
-            new = step(st, pairs, d)[0]
-            return new, k + 1, drift(new)
+            st, k, kicked = c
+            new = step(st, pairs, drift(st, kicked))[0]
+            return new, k + 1, kick(new)
 
         def go_on(c):
-            st, k, d = c
-            return (k < n_steps) & ~needs_rebuild(st, d[2])
+            st, k, kicked = c
+            return (k < n_steps) & ~needs_rebuild(st, drift(st, kicked)[2])
 
         def segment(c):
             c = jax.lax.while_loop(go_on, lambda c: advance(c, "keep"), c)
@@ -630,7 +655,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
 
         k0 = jnp.zeros_like(jnp.asarray(n_steps))
         return jax.lax.while_loop(lambda c: c[1] < n_steps, segment,
-                                  (state, k0, drift(state)))[0]
+                                  (state, k0, kick(state)))[0]
 
     return step, run_steps, energies
 

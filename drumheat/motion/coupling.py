@@ -8,7 +8,10 @@ the thermal model's array leaves (so that parameters travel in the state and an 
 over them), contact-time accumulators aligned with the neighbour pairs (:class:`PairTimes`,
 carried across neighbour-list rebuilds like the tangential springs: ``CoupledHeat`` is a
 :class:`~drumheat.mechanics.integrator.PairCarried`) and per particle-wall slot, and the
-contact time summed over the current output interval (:class:`ContactCount`). With friction
+contact time summed over the current output interval (:class:`ContactCount`). A step adds its
+contact times to the accumulators of the thermal step only; the thermal step folds them into
+the recording's and the output interval's (:func:`recorded_times`, :func:`contact_count` read
+them, the time since the last thermal step included). With friction
 heat (``make_dem(friction_heat=...)``, :mod:`drumheat.mechanics.dissipation`) each step's heat
 of the contacts is gathered in a :class:`FrictionBook` and added to the temperatures with the
 thermal step.
@@ -31,12 +34,16 @@ from drumheat.thermal.network import ContactNetwork
 
 __all__ = ["CoupledHeat", "PairTimes", "ContactCount", "FrictionBook", "thermal_network",
            "make_thermal_update", "initial_extra", "reset_record", "reset_count",
+           "recorded_times", "contact_count",
            "drum_wall_step"]
 
 
 class PairTimes(NamedTuple):
     """Contact time of each neighbour pair (M,) s, aligned with ``nbrs.idx``: ``time`` since
-    the last thermal step, ``rec_time`` since the start of the recording interval."""
+    the last thermal step (while ``k = 0`` still that of the last thermal step, which the next
+    step overwrites); ``rec_time`` from the start of the recording interval to the last
+    thermal step (:func:`recorded_times` adds ``time``; negative: the recording started
+    after the last thermal step, :func:`reset_record`)."""
 
     time: jax.Array
     rec_time: jax.Array
@@ -44,7 +51,8 @@ class PairTimes(NamedTuple):
 
 class ContactCount(NamedTuple):
     """Contact time of all particle pairs (``pair``) and of all particle-heated-wall contacts
-    (``wall``) since :func:`reset_count`, s."""
+    (``wall``) from :func:`reset_count` to the last thermal step, s (:func:`contact_count`
+    adds the time since; negative: the count started after the last thermal step)."""
 
     pair: jax.Array
     wall: jax.Array
@@ -69,9 +77,10 @@ class CoupledHeat(PairCarried):
     T: (N,) K. Q: {account: J} heat received since t = 0. model: the thermal model's array
     leaves (``eqx.partition(m, eqx.is_array)[0]``). k: steps since the last thermal step.
     wall_time, rec_wall_time: (N * n_walls,) s, contact time per particle-wall slot since the
-    last thermal step and since the start of the recording interval. pair: :class:`PairTimes`.
-    count: :class:`ContactCount`. Optional (None when the run has none): Q_walls (n_walls,) J,
-    the heat each wall primitive gave (``per_wall``); wall: the drum wall's segments
+    last thermal step and from the start of the recording interval to the last thermal step
+    (as ``time`` and ``rec_time`` of :class:`PairTimes`). pair: :class:`PairTimes`. count:
+    :class:`ContactCount`. Optional (None when the run has none): Q_walls (n_walls,) J, the
+    heat each wall primitive gave (``per_wall``); wall: the drum wall's segments
     (``[heat.drum_wall]``, :meth:`drumheat.thermal.drum_wall.DrumWall.initial`); friction: a
     :class:`FrictionBook`; flow: the motion model's own accumulators (``moving_bed``).
     """
@@ -89,11 +98,24 @@ class CoupledHeat(PairCarried):
     friction: Optional[FrictionBook] = None
     flow: Optional[dict] = None
 
-    def pair_arrays(self) -> PairTimes:
-        return self.pair
+    def pair_arrays(self):
+        """``(pair, count, k)``: the pairs' accumulators, the count they fold into and the
+        steps since the last thermal step."""
+        return self.pair, self.count, self.k
+
+    @staticmethod
+    def remap_pair_arrays(arrays, remap):
+        """The pairs' accumulators carried to a new neighbour list; the time since the last
+        thermal step of the pairs the list drops stays in the count (:func:`contact_count`
+        reads the same before and after)."""
+        pair, count, k = arrays
+        new = PairTimes(*(remap(a) for a in pair))
+        dropped = jnp.where(k > 0, jnp.sum(pair.time) - jnp.sum(new.time), 0.0)
+        return new, count._replace(pair=count.pair + dropped), k
 
     def with_pair_arrays(self, arrays) -> "CoupledHeat":
-        return self.replace(pair=arrays)
+        pair, count, _ = arrays
+        return self.replace(pair=pair, count=count)
 
     def replace(self, **fields) -> "CoupledHeat":
         """This state with ``fields`` replaced."""
@@ -140,7 +162,8 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     parameters are part of it (``model``), so a ``vmap`` over states runs variants with
     different parameters. Every step adds the step's contact times (the contacts that conduct,
     ``Contacts.pair_conducts`` / ``wall_conducts``) to its accumulators; every ``substeps``
-    steps the temperatures take one explicit step on them. ``batch_axis`` names the vmap axis
+    steps the temperatures take one explicit step on them, which then go into the recording's
+    and the output interval's accumulators (``fold``). ``batch_axis`` names the vmap axis
     of an ensemble: the thermal sub-step then stays a real ``lax.cond`` (all members count the
     same steps).
 
@@ -159,12 +182,19 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     if per_wall and wall_ids is None:
         wall_ids = np.arange(n_walls, dtype=np.int32)
 
-    slot_heated = jnp.tile(heated, n).astype(jnp.float64)
+    slot_heated = _slot_heated(heated, n)
 
     def model_of(extra):
         return eqx.combine(extra.model, skeleton)
 
     drum_wall = model.drum_wall is not None  # [heat.drum_wall]: segments with their own state
+
+    def fold(extra):
+        """``extra`` with the contact times since the last thermal step added to the
+        recording's and the output interval's accumulators."""
+        pair = extra.pair._replace(rec_time=extra.pair.rec_time + extra.pair.time)
+        return extra.replace(pair=pair, rec_wall_time=extra.rec_wall_time + extra.wall_time,
+                             count=_count(extra, slot_heated))
 
     def thermal_step(extra, ops):
         idx = ops[0] if drum_wall else ops
@@ -191,26 +221,26 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
                 fr.walls + fr.E_walls, fr.sources + fr.E_sources)
         T = extra.T + heat / m.particles.capacity
         Q = {a: extra.Q[a] + h * ext[a] if a in ext else extra.Q[a] for a in extra.Q}
-        pair = extra.pair._replace(time=jnp.zeros_like(extra.pair.time))
-        return extra.replace(T=T, Q=Q, k=jnp.zeros_like(extra.k), pair=pair,
-                             wall_time=jnp.zeros_like(extra.wall_time), **out)
+        # k = 0 marks the times as folded: the next step starts them afresh (zeroing them here
+        # made XLA copy both every step in the other branch of the lax.cond)
+        return fold(extra).replace(T=T, Q=Q, k=jnp.zeros_like(extra.k), **out)
 
     def update(extra, state, contacts, dt_):
         # the contacts that conduct: overlapping or within the conduction gap tolerance
         # ([heat.contact] / [heat.wall] gap_tolerance, drumheat.mechanics.make_dem)
+        # (the recording's and the output interval's accumulators take them at the thermal
+        # step: a per-step sum over the pairs cost ~0.1 ms per step at N = 1e4 on XLA:CPU)
         pm = contacts.pair_conducts.astype(jnp.float64) * dt
         wm = contacts.wall_conducts.astype(jnp.float64) * dt
-        pair = PairTimes(extra.pair.time + pm, extra.pair.rec_time + pm)
-        count = ContactCount(extra.count.pair + jnp.sum(pm),
-                             extra.count.wall + jnp.sum(wm * slot_heated))
+        fresh = extra.k == 0  # the first step after a thermal step
+        pair = extra.pair._replace(time=jnp.where(fresh, 0.0, extra.pair.time) + pm)
         fr = extra.friction
         if friction:
             d = contacts.dissipation
             fr = fr._replace(E=fr.E + d.particle, E_walls=fr.E_walls + d.walls,
                              E_sources=fr.E_sources + d.by_source)
-        extra = extra.replace(pair=pair, wall_time=extra.wall_time + wm,
-                              rec_wall_time=extra.rec_wall_time + wm, k=extra.k + 1,
-                              count=count, friction=fr)
+        extra = extra.replace(pair=pair, wall_time=jnp.where(fresh, 0.0, extra.wall_time) + wm,
+                              k=extra.k + 1, friction=fr)
         ops = (state.nbrs.idx, state.position, state.time) if drum_wall else state.nbrs.idx
         if substeps == 1:
             return thermal_step(extra, ops)
@@ -268,15 +298,54 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
         friction=book)
 
 
+def _slot_heated(wall_heated, n):
+    """(n * n_walls,) 1.0 for the particle-wall slots of the heated walls, else 0.0."""
+    return jnp.tile(jnp.asarray(wall_heated, bool), n).astype(jnp.float64)
+
+
+def _since_thermal_step(extra):
+    """``(pair (M,), wall (N * n_walls,))``: the contact times since the last thermal step."""
+    fresh = extra.k == 0
+    return (jnp.where(fresh, 0.0, extra.pair.time), jnp.where(fresh, 0.0, extra.wall_time))
+
+
+def _pending(extra, slot_heated) -> ContactCount:
+    """The contact times since the last thermal step, summed as :class:`ContactCount`."""
+    pair, wall = _since_thermal_step(extra)
+    return ContactCount(jnp.sum(pair), jnp.sum(wall * slot_heated))
+
+
+def _count(extra, slot_heated) -> ContactCount:
+    """The count with the contact times since the last thermal step added."""
+    return ContactCount(*(c + p for c, p in zip(extra.count, _pending(extra, slot_heated))))
+
+
+def recorded_times(extra):
+    """``(pair (M,), wall (N * n_walls,))``: the contact time of each neighbour pair and of
+    each particle-wall slot since :func:`reset_record`, s."""
+    pair, wall = _since_thermal_step(extra)
+    return extra.pair.rec_time + pair, extra.rec_wall_time + wall
+
+
+def contact_count(extra, wall_heated) -> ContactCount:
+    """The contact time of all particle pairs and of all particle-heated-wall contacts since
+    :func:`reset_count`, s (``wall_heated`` (n_walls,) as for :func:`make_thermal_update`)."""
+    return _count(extra, _slot_heated(wall_heated, extra.T.shape[-1]))
+
+
 def reset_record(extra):
-    """``extra`` with the contact-time accumulators of the recording set to zero."""
-    return extra.replace(pair=extra.pair._replace(rec_time=jnp.zeros_like(extra.pair.rec_time)),
-                         rec_wall_time=jnp.zeros_like(extra.rec_wall_time))
+    """``extra`` with the contact times of the recording (:func:`recorded_times`) set to zero:
+    the accumulators take minus the time since the last thermal step, which the next thermal
+    step adds."""
+    pair, wall = _since_thermal_step(extra)
+    return extra.replace(pair=extra.pair._replace(rec_time=-pair), rec_wall_time=-wall)
 
 
-def reset_count(extra):
-    """``extra`` with the contact time summed over the output interval set to zero."""
-    return extra.replace(count=ContactCount(*(jnp.zeros_like(v) for v in extra.count)))
+def reset_count(extra, wall_heated):
+    """``extra`` with the contact time summed over the output interval (:func:`contact_count`)
+    set to zero, as :func:`reset_record`."""
+    pending = _pending(extra, _slot_heated(wall_heated, extra.T.shape[-1]))
+    return extra.replace(count=ContactCount(*(-p for p in pending)))
 
 
 def thermal_step_limit(model: ThermalModel, n: int, dim: int, size_ratio: float,

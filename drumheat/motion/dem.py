@@ -37,8 +37,8 @@ from drumheat.mechanics.analysis import count_interfraction_contacts
 from drumheat.mechanics.dissipation import SOURCES
 from drumheat.mechanics.integrator import JIT_OPTIONS
 from drumheat.motion.base import register
-from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_count,
-                                      reset_record)
+from drumheat.motion.coupling import (contact_count, initial_extra, make_thermal_update,
+                                      recorded_times, reset_count, reset_record)
 from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.replay import Recording
 from drumheat.motion.rows import stack_arrays, stack_rows
@@ -81,14 +81,14 @@ class ContactRecorder:
 
     def add(self, idx, extra, position):
         """Record one interval: the neighbour pairs ``idx`` with their contact times
-        (``extra.pair.rec_time``), the wall contacts and the positions at its end."""
-        pt = np.asarray(extra.pair.rec_time)
+        (:func:`~drumheat.motion.coupling.recorded_times` of ``extra``), the wall contacts
+        and the positions at its end."""
+        pt, wt = (np.asarray(a) for a in recorded_times(extra))
         keep = (idx[0] < self.n) & (pt > 0)
         self.pair_i.append(idx[0][keep])
         self.pair_j.append(idx[1][keep])
         self.pair_dur.append(pt[keep])
         self.pair_ptr.append(self.pair_ptr[-1] + int(keep.sum()))
-        wt = np.asarray(extra.rec_wall_time)
         nz = np.nonzero(wt > 0)[0]
         self.wall_p.append(nz // self.n_walls)
         self.wall_k.append(nz % self.n_walls)
@@ -257,7 +257,7 @@ class DEMBed(DEMMotion):
         cleared, and the contact-time count at the start of an output interval."""
         extra = reset_record(state.extra)
         if np.any(np.isclose(self.t_out, t0, rtol=0, atol=1e-9 * self.dt)):
-            extra = reset_count(extra)
+            extra = reset_count(extra, self.wall_heated)
         return state._replace(extra=extra, max_overlap=jnp.zeros_like(state.max_overlap))
 
     def advance(self, state, t0, t1):
@@ -328,8 +328,9 @@ class DEMBed(DEMMotion):
             return {"T": state["T"], "Q": state["Q"], "g": state["g"]}
         span = self.steps_per_output * self.dt
         ex = state.extra
+        count = contact_count(ex, self.wall_heated)
         row = {"T": ex.T, "Q": ex.Q, "position": state.position,
-               "n_pairs": ex.count.pair / span, "n_wall": ex.count.wall / span,
+               "n_pairs": count.pair / span, "n_wall": count.wall / span,
                "mechanics": self.mechanics(state)}
         if ex.wall is not None:  # [heat.drum_wall]
             row["wall"] = ex.wall

@@ -61,8 +61,8 @@ from drumheat.mechanics import make_dem
 from drumheat.models.moving_bed import BETA_HOPPER, lmtd
 from drumheat.motion.base import register
 from drumheat.motion.dem_common import DEMMotion
-from drumheat.motion.coupling import (initial_extra, make_thermal_update, reset_count,
-                                      reset_record)
+from drumheat.motion.coupling import (contact_count, initial_extra, make_thermal_update,
+                                      reset_count, reset_record)
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene, SceneError
 
@@ -308,18 +308,19 @@ class MovingBed(DEMMotion):
         return state._replace(extra=extra.replace(flow=self.initial_flow()))
 
     def advance(self, state, t0, t1):
-        start = state._replace(extra=reset_count(reset_record(state.extra)),
+        start = state._replace(extra=reset_count(reset_record(state.extra), self.wall_heated),
                                max_overlap=jnp.zeros_like(state.max_overlap))
         return self.dem.run_steps(start, int(round((t1 - t0) / self.dt)))
 
     def observe(self, state) -> dict:
         ex = state.extra
         span = self.steps_per_output * self.dt
+        count = contact_count(ex, self.wall_heated)
         return {"T": ex.T, "Q": ex.Q, "position": state.position,
                 "Q_tubes": ex.Q_walls[self.geometry.tube_index],
                 "flow": {k: ex.flow[k] for k in FLOW_RECORDS},
                 "max_overlap": state.max_overlap,
-                "n_pairs": ex.count.pair / span, "n_wall": ex.count.wall / span,
+                "n_pairs": count.pair / span, "n_wall": count.wall / span,
                 "mechanics": self.mechanics(state)}
 
     def finish(self, rows, log, state) -> Trajectory:
