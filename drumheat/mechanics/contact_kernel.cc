@@ -331,8 +331,17 @@ struct Chunks {
 // slots before the padding i = n when the list is sorted by i), the pair slots cut where the
 // particle ranges begin (equal runs of slots if the list is not sorted by i: the padding is
 // then found slot by slot)
+// whether P[0 .. m) never decreases: one pass without an early exit, which the compiler turns
+// into vector instructions (std::is_sorted's exit test per element keeps it a scalar loop, and
+// every call checks the whole list)
+bool non_decreasing(const int32_t* P, int64_t m) {
+  int bad = 0;
+  for (int64_t k = 1; k < m; ++k) bad |= P[k] < P[k - 1];
+  return bad == 0;
+}
+
 Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int64_t nw) {
-  const bool by_particle = std::is_sorted(P, P + m);
+  const bool by_particle = non_decreasing(P, m);
   const int64_t listed =
       by_particle ? std::lower_bound(P, P + m, static_cast<int32_t>(n)) - P : m;
   int64_t nc = pool.num_threads();
