@@ -45,20 +45,12 @@ from drumheat.mechanics.neighbors import remap_pair_data, sort_pairs, take_pair_
 
 
 def scene_motion(n, backend, cache):
-    """The motion model of glass-drum-3d at N on ``backend`` and its initial state."""
+    """The motion model of glass-drum-3d at N on ``backend`` and its initial state, the bed
+    poured once into ``cache`` and read from there (bench_vs_liggghts.py's scene and packing)."""
+    from bench_vs_liggghts import scene_for, scene_packing
     from drumheat.motion import make_motion
-    from drumheat.scene import load_scene
 
-    scene = load_scene("glass-drum-3d", {"groups.0.count": n, "drum.depth": n * 2.6e-5,
-                                         "dem.contact_backend": backend})
-    motion = make_motion(scene)
-    path = Path(cache) / f"glass-drum-3d_{n}.npy" if cache else None
-    if path is not None and path.exists():
-        motion._packing = np.load(path)
-    pos = motion.packing_positions()
-    if path is not None and not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        np.save(path, pos)
+    motion = make_motion(scene_for(n, backend, scene_packing(n, cache)))
     return motion, motion.initial_state()
 
 

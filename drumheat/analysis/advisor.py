@@ -24,7 +24,7 @@ too, so the advisor can say which included effects are negligible and which abse
   offset of the bed's centre of mass (``r_c = 4 R sin^3(eps) / (3 (2 eps - sin 2 eps))``, the
   centroid of the circular segment of the fill; ``theta`` the dynamic angle of repose:
   ``packing.surface_angle`` if given, else ``atan(dem.friction)`` for a DEM bed, else 30 deg);
-  docs/models/friction-heat.md, where the DEM's heat equals the drive's work to 3e-5;
+  docs/models/friction-heat.md compares it with the DEM's heat;
 * conduction inside the particles: the Biot number ``Bi = h R / lambda_p`` with ``h`` the sum
   of all surface coefficients of the included effects (the largest case: contacts and walls on
   their share of the surface) -- lumped particles are fine for Bi < 0.1.
@@ -325,6 +325,10 @@ def explain(scene) -> Advice:
     return Advice(scene.name, cond, terms, Bi, verdict)
 
 
+#: solids fraction of a 3D bed and area fraction of a 2D monolayer, for the bed's size
+SOLIDS_FRACTION, AREA_FRACTION = 0.6, 0.8
+
+
 def _wall_layer_fraction(scene, d):
     """Fraction of the particles in the layer at the heated walls (estimate), and a note.
 
@@ -343,7 +347,7 @@ def _wall_layer_fraction(scene, d):
     Returns ``(0, "")`` where no wall applies (granulator, fluidized bed, pneumatic channel).
     """
     N = scene.n_particles
-    beta = 0.6  # solids fraction of the bed (3D)
+    beta = SOLIDS_FRACTION
     if scene.motion.model == "moving_bed":
         h = scene.hopper
         g = hopper_walls(h)
@@ -389,8 +393,8 @@ def _bed_area(scene, d) -> float:
     solids fraction 0.6 (3D), their area at area fraction 0.8 (2D monolayer)."""
     if scene.dim == 3:
         return sum(g.count * math.pi * g.diameter**3 / 6 for g in scene.groups) / (
-            0.6 * scene.drum.depth)
-    return sum(g.count * math.pi * g.diameter**2 / 4 for g in scene.groups) / 0.8
+            SOLIDS_FRACTION * scene.drum.depth)
+    return sum(g.count * math.pi * g.diameter**2 / 4 for g in scene.groups) / AREA_FRACTION
 
 
 def _friction_heat_term(scene, d, c) -> Term | None:

@@ -66,7 +66,7 @@ from drumheat.mechanics.errors import (
     ParticleEscapeError,
 )
 from drumheat.mechanics.forces import ContactForces, Contacts, make_contact_forces
-from drumheat.mechanics.neighbors import (PEC, NeighborSetup, make_neighbor_setup, remap_pair_data,
+from drumheat.mechanics.neighbors import (PEC, NeighborSetup, make_neighbor_setup, pair_sources,
                                           take_pair_data)
 from drumheat.models.soft_sphere import STICKING_CONTACTS, default_time_step
 
@@ -363,8 +363,8 @@ class DEM:
             raise NeighborListError(
                 f"neighbour list still overflows after reallocation (pairs {count}, capacity "
                 f"{target}, cell capacity {new.cell_list_capacity})", state)
-        remap = lambda a: remap_pair_data(  # noqa: E731
-            state.nbrs.idx, a, new.idx, n, old_sorted=True)
+        source = pair_sources(state.nbrs.idx, new.idx, n, old_sorted=True)  # found once
+        remap = lambda a: take_pair_data(a, source)  # noqa: E731
         pdata = pair_extra(state.extra)
         extra = state.extra if pdata is None else state.extra.with_pair_arrays(
             remap_pair_extra(type(state.extra), pdata, remap))
@@ -386,8 +386,8 @@ class DEM:
         in place (buffer donation: one copy of the state on the device instead of two), and the
         start is copied to the host for a redo or an error; ``state`` itself and the states
         given to ``callback`` are never donated (a device copy is made of them). It trades
-        speed for memory: on an H100 it saved 13 % of the peak device memory and cost 2.4x in
-        step rate (docs/performance.md, GPU), because every chunk waits for the copy.
+        speed for memory, because every chunk waits for the copy (the measured trade:
+        docs/performance.md, GPU).
         """
         chunk = int(chunk or self.default_chunk)
         donate = bool(donate)
@@ -796,13 +796,13 @@ def make_dem(
       pair_kernel: ``"jax"`` (default; every backend, vmap, any material table) or ``"cpu"``:
         the particle-particle and particle-wall contacts (and the conduction) in one C++ loop
         on XLA's CPU threads, called through ``jax.ffi`` (:mod:`drumheat.mechanics.cpu_kernel`;
-        the DEM step 2.3-5.9x faster on CPU, docs/performance.md; 2D and 3D, float32 and
+        a faster DEM step on CPU, docs/performance.md; 2D and 3D, float32 and
         float64, any materials, rolling resistance, friction heat; single runs, not under vmap;
         compiled with g++ on first use, ``cpu_kernel.available()`` says whether it can be).
         Same contact law; results agree with ``"jax"`` to round-off.
       neighbor_builder: who rebuilds the neighbour list in a run: ``"jax"`` (the cell list in
         XLA) or ``"cpu"`` (one C++ pass, :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`:
-        the same pairs in the same order, 50-100x quicker on XLA:CPU); default ``"cpu"`` with
+        the same pairs in the same order, quicker on XLA:CPU); default ``"cpu"`` with
         ``pair_kernel="cpu"``, else ``"jax"``.
       conduction: :class:`~drumheat.mechanics.conduction.PairConduction`: heat conduction
         through the touching pairs every step (:mod:`drumheat.mechanics.conduction`); the

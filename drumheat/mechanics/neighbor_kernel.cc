@@ -143,12 +143,11 @@ void sources(const int32_t* old, int64_t mo, const int32_t* nw, int64_t m, int64
   for (int64_t k = 0; k < mo; ++k) perm[k] = static_cast<int32_t>(k);
   if (!sorted)  // a list not in canonical order (not made here): sort its keys first
     std::stable_sort(perm.begin(), perm.end(), [&](int32_t a, int32_t b) { return ko[a] < ko[b]; });
-  int64_t u = 0;
+  int64_t u = 0;  // the new list is in canonical order (build): one merge-like pass
   for (int64_t k = 0; k < m; ++k) {
     src[k] = -1;
     if (nw[k] >= n) continue;
     const int64_t kn = key(nw[k], nw[m + k]);
-    if (k > 0 && kn < key(nw[k - 1], nw[m + k - 1])) u = 0;  // (never: the new list is sorted)
     while (u < mo && ko[perm[u]] < kn) ++u;
     if (u < mo && ko[perm[u]] == kn) src[k] = perm[u];
   }

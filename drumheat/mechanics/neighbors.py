@@ -35,8 +35,8 @@ codes of ``jax_md.partition.NeighborList``, so code written for jax-md's lists r
   :func:`take_pair_data` carries).
 * On CPU with the C++ contact loop the rebuild of a run is one C++ pass
   (``NeighborSetup(builder="cpu")``, :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`):
-  the same pairs in the same canonical order and the same sources, 5-10x quicker than the
-  XLA build (docs/performance.md); allocations stay in XLA.
+  the same pairs in the same canonical order and the same sources, quicker than the XLA build
+  (docs/performance.md); allocations stay in XLA.
 """
 
 from __future__ import annotations
@@ -417,7 +417,7 @@ class NeighborSetup:
         """``(rebuilt list, source)`` (jittable): :meth:`rebuild`, and for each new pair slot
         the old slot of the same pair or -1 (:func:`pair_sources`; :func:`take_pair_data`
         moves per-pair data with it). With ``builder="cpu"`` one C++ pass finds the same pairs
-        in the same order (``tests/test_neighbors.py`` holds the two equal)."""
+        in the same order (``tests/test_neighbors_cpu.py`` holds the two equal)."""
         if self.builder != "cpu":
             new = self.rebuild(position, nbrs)
             return new, pair_sources(nbrs.idx, new.idx, position.shape[0], old_sorted=True)
