@@ -22,8 +22,12 @@ steps, the device's peak memory (``memory_stats()['peak_bytes_in_use']``, GPU) o
 peak resident memory (CPU), both per particle, and the mean temperature change as a sanity
 check that heat moved.
 
+With ``--trace STEPS``, each case then runs ``dem.run_steps`` over STEPS steps under the JAX
+profiler and prints the device's kernels and the host's work summed per step
+(``scripts/trace_summary.py``); ``--trace-dir`` keeps the trace files.
+
 Usage: python scripts/bench_gpu.py [--n 100000 1000000] [--precision float32 float64]
-       [--seconds 15] [--warm 300] [--base FILE] [--json FILE]
+       [--seconds 15] [--warm 300] [--base FILE] [--json FILE] [--trace STEPS --trace-dir DIR]
        python scripts/bench_gpu.py --make-base FILE     (pour the N = 2000 slice, save it)
 """
 
@@ -32,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -92,8 +97,11 @@ def mean_temperature(state) -> float:
 
 
 def measure(n: int, precision: str, base: Path, seconds: float, warm: int,
-            donate: bool = False) -> dict:
-    """In this process: build the scene at N, warm up, time; one dict of numbers."""
+            donate: bool = False, trace: int = 0, trace_dir=None) -> dict:
+    """In this process: build the scene at N, warm up, time; one dict of numbers. With
+    ``trace`` > 0, then a profiler trace of ``dem.run_steps`` over ``trace`` steps (the
+    compiled loop without the chunk checks), printed per step by track (device kernels apart
+    from host work) and saved into ``trace_dir``."""
     import resource
     import tempfile
 
@@ -131,6 +139,15 @@ def measure(n: int, precision: str, base: Path, seconds: float, warm: int,
     stats = dev.memory_stats() or {}
     peak = stats.get("peak_bytes_in_use")
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    if trace:
+        from trace_summary import print_split, trace_totals
+
+        t_wall, totals, path = trace_totals(dem.run_steps, (out, trace), tempfile.mkdtemp())
+        if trace_dir is not None:
+            shutil.copyfile(path, Path(trace_dir) / f"trace-{n}-{precision}.json.gz")
+        print(f"trace: {trace} steps in {t_wall:.3f} s under the profiler "
+              f"({1e6 * t_wall / trace:.1f} us per step)")
+        print_split(totals, trace, top=25)
     return dict(n=n, precision=precision, donate=str(donate), device=f"{dev.platform}:{dev.device_kind}",
                 jax=jax.__version__, steps=steps, wall_s=wall, rate=n * steps / wall,
                 rebuilds=int(out.n_rebuilds) - r0, setup_s=t_setup, warm_s=t_warm,
@@ -155,6 +172,10 @@ def main():
     ap.add_argument("--donate", nargs="+", default=["off"], choices=["on", "off"],
                     help="buffer donation of DEM.run's chunks (DEM.run(donate=...)); several "
                          "values time each")
+    ap.add_argument("--trace", type=int, default=0, metavar="STEPS",
+                    help="after each timing, a profiler trace of STEPS steps, summed per step "
+                         "(printed; the trace file into --trace-dir)")
+    ap.add_argument("--trace-dir", type=Path, help="where the trace files go")
     ap.add_argument("--one", nargs=3, metavar=("N", "PRECISION", "DONATE"),
                     help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -164,7 +185,8 @@ def main():
     if args.one:
         donate = args.one[2] == "on"
         print("RESULT " + json.dumps(measure(int(args.one[0]), args.one[1], args.base,
-                                             args.seconds, args.warm, donate)), flush=True)
+                                             args.seconds, args.warm, donate, args.trace,
+                                             args.trace_dir)), flush=True)
         return
     if not args.base.exists():
         make_base(args.base)
@@ -173,7 +195,9 @@ def main():
     cases = [(prec, n, don) for prec in args.precision for n in args.n for don in args.donate]
     for prec, n, don in cases:
         cmd = [sys.executable, __file__, "--one", str(n), prec, don, "--base",
-               str(args.base), "--seconds", str(args.seconds), "--warm", str(args.warm)]
+               str(args.base), "--seconds", str(args.seconds), "--warm", str(args.warm),
+               "--trace", str(args.trace)] + (["--trace-dir", str(args.trace_dir)]
+                                              if args.trace_dir else [])
         try:
             p = subprocess.run(cmd, env=env, capture_output=True, text=True,
                                timeout=args.timeout)
@@ -182,6 +206,9 @@ def main():
                   flush=True)
             continue
         res = [line[7:] for line in p.stdout.splitlines() if line.startswith("RESULT ")]
+        if args.trace:
+            print("\n".join(line for line in p.stdout.splitlines()
+                             if not line.startswith("RESULT ")), flush=True)
         if not res:
             print(f"N={n} {prec} donate {don}: failed\n{p.stderr[-3000:]}", flush=True)
             continue

@@ -3,8 +3,12 @@
 #   1. the card and JAX's view of it;
 #   2. scripts/bench_gpu.py: glass-drum-3d through the product path at N = 1e5 and 1e6, float32
 #      and float64 mechanics: particle-steps/s and peak device memory per particle;
-#   3. the tests of the newer heat features (friction heat, drum wall, coarse-graining) on the
-#      GPU: the same code must give the same physics there (the suite itself never needs one).
+#   3. the tests of the newer heat features (coupled contact times, friction heat, drum wall,
+#      coarse-graining) on the GPU: the same code must give the same physics there (the suite
+#      itself never needs one).
+# Environment knobs: PRECISIONS (default "float32 float64"), NS ("100000 1000000"), TRACE
+# (steps of a profiler trace after each timing, 0 = none; the trace files go to $OUT, the
+# per-kernel lines to bench_gpu.log only), TESTS (the test files), TEST_SECONDS (their limit).
 # Wheels a GPU machine without network lacks (tomli_w; jax-md and its needs for the tests) may
 # lie in .whl/ (git-ignored; `pip download --no-deps --only-binary=:all: --python-version 3.12
 # -d .whl NAME`): they are installed into /tmp/site first. Logs and JSON go to $OUT.
@@ -24,9 +28,12 @@ else
 fi
 nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.sm,clocks.mem --format=csv
 python3 -c "import jax; print('jax', jax.__version__, jax.devices())"
-timeout 330 python3 scripts/bench_gpu.py --n 100000 1000000 --precision float32 float64 \
-  --seconds "$SECONDS_PER_CASE" --warm 200 --timeout 150 --json "$OUT/bench_gpu.jsonl" \
-  2>&1 | tee "$OUT/bench_gpu.log"
-timeout 120 python3 -m pytest -q -x -p no:cacheprovider -o addopts="" -m "not slow" \
-  tests/test_friction_heat.py tests/test_drum_wall.py tests/test_coarse_grain.py \
-  2>&1 | tee "$OUT/tests_gpu.log" | tail -15
+TESTS=${TESTS:-tests/test_coupled.py tests/test_friction_heat.py tests/test_drum_wall.py tests/test_coarse_grain.py}
+# shellcheck disable=SC2086  # word splitting of the lists is meant
+timeout 330 python3 scripts/bench_gpu.py --n ${NS:-100000 1000000} \
+  --precision ${PRECISIONS:-float32 float64} --seconds "$SECONDS_PER_CASE" --warm 200 \
+  --timeout 150 --json "$OUT/bench_gpu.jsonl" --trace "${TRACE:-0}" --trace-dir "$OUT" \
+  2>&1 | tee "$OUT/bench_gpu.log" | grep -v '^  '
+# shellcheck disable=SC2086
+timeout "${TEST_SECONDS:-120}" python3 -m pytest -q -x -p no:cacheprovider -o addopts="" \
+  -m "not slow" $TESTS 2>&1 | tee "$OUT/tests_gpu.log" | tail -15

@@ -16,8 +16,8 @@ steps, timed piece by piece on the same state:
   loop that feeds its springs back;
 * ``rebuild``: one neighbour rebuild (cell list build, pair sort, remap of the springs and the
   contact-time accumulators), and its pieces;
-* with ``--trace``: a ``jax.profiler`` trace of the no-rebuild loop, its thunks summed by name
-  (the largest twenty), per step.
+* with ``--trace``: a ``jax.profiler`` trace of the no-rebuild loop, its events summed by
+  track and name (the largest twenty of each track), per step.
 
 The packing (the pour, minutes at N = 50 000) is kept in ``--packing-cache`` to be reused.
 Each line prints the machine's load and the CPU steal during its timing (scripts/machine.py).
@@ -27,11 +27,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import glob
-import gzip
-import json
 import time
-from collections import defaultdict
 from pathlib import Path
 
 import jax
@@ -40,6 +36,7 @@ import numpy as np
 
 import drumheat  # noqa: F401  (x64 for the temperatures)
 from machine import cpu_ticks, load, steal_percent  # noqa: E402  (scripts/machine.py)
+from trace_summary import print_split, trace_totals  # noqa: E402
 from drumheat.mechanics.integrator import JIT_OPTIONS, pair_extra, remap_pair_extra
 from drumheat.mechanics.neighbors import remap_pair_data, sort_pairs, take_pair_data
 
@@ -110,23 +107,6 @@ def loops(dem):
                 sort=jit(sort_only), remap=jit(remap_only))
 
 
-def trace_split(fn, args, steps, top=20):
-    """Thunk times of one call of ``fn(*args)`` from a jax.profiler trace, us per step."""
-    out = Path("/tmp/drumheat_profile_scene_step")
-    jax.block_until_ready(fn(*args))
-    with jax.profiler.trace(str(out), create_perfetto_trace=True):
-        jax.block_until_ready(fn(*args))
-    path = sorted(glob.glob(str(out / "**" / "perfetto_trace.json.gz"), recursive=True))[-1]
-    data = json.load(gzip.open(path))
-    events = data["traceEvents"] if isinstance(data, dict) else data
-    total = defaultdict(float)
-    for e in events:
-        if e.get("ph") == "X" and "dur" in e:
-            total[e["name"]] += e["dur"]
-    rows = sorted(total.items(), key=lambda kv: -kv[1])[:top]
-    return [(name, dur / steps) for name, dur in rows]
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=10000)
@@ -163,9 +143,9 @@ def main():
     for name, t, ld, st, per in rows:
         print(f"  {name:18s} {1e3 * t / per:8.3f} ms (load {ld:.2f}, steal {st:.0f} %)")
     if args.trace:
-        print("trace of the no-rebuild loop, us per step:")
-        for name, us in trace_split(f["keep"], (state, k), args.loop):
-            print(f"  {us:9.1f}  {name}")
+        print("trace of the no-rebuild loop, per step:")
+        _, totals, _ = trace_totals(f["keep"], (state, k), "/tmp/drumheat_profile_scene_step")
+        print_split(totals, args.loop)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,7 @@
 """Coupled thermal DEM (motion 'dem') and replay of recorded contacts (motion 'replay')."""
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -104,6 +106,37 @@ def test_resting_dem_bed_matches_the_static_model(gap):
                                rtol=0, atol=1e-12)
 
 
+def test_padding_slots_of_the_thermal_network_add_nothing():
+    # the DEM's contact network keeps the neighbour list's padding index n (dropped by the
+    # effects' scatters, clamped by their gathers) rather than pointing the padding at a real
+    # particle, whose atomic adds a GPU serialises (docs/performance.md, GPU): the heat flows
+    # are those of the network without the padding slots, bit for bit
+    from drumheat.motion.coupling import thermal_network
+    from drumheat.thermal.contact import ContactConduction
+    from drumheat.thermal.particles import ThermalParticles
+
+    n, h = 5, 1e-3
+    idx = jnp.array([[0, 0, 1, 3, n, n, n], [1, 2, 4, 4, n, n, n]])
+    times = jnp.array([1.0, 0.5, 0.25, 1.0, 1.0, 1.0, 1.0]) * h  # padding times are not read
+    no_wall = (jnp.zeros(n), jnp.array([False]), 1, h)
+    net = thermal_network(idx, n, times, *no_wall)
+    cut = thermal_network(idx[:, :4], n, times[:4], *no_wall)
+    assert np.all(np.asarray(net.pair_i)[4:] == n) and np.all(np.asarray(net.pair_weight)[4:] == 0)
+    particles = ThermalParticles(diameter=jnp.full(n, 4e-3), mass=jnp.full(n, 1e-4),
+                                 heat_capacity=jnp.full(n, 900.0))
+    T = jnp.array([300.0, 310.0, 320.0, 330.0, 340.0])
+    effect = ContactConduction(alpha=jnp.asarray(100.0))
+    q = effect.heat_flow(T, particles, net)
+    assert np.all(np.asarray(q) != 0)
+    np.testing.assert_array_equal(q, effect.heat_flow(T, particles, cut))
+    np.testing.assert_array_equal(effect.conductance_sum(particles, net),
+                                  effect.conductance_sum(particles, cut))
+
+
+@pytest.mark.skipif(jax.default_backend() != "cpu",
+                    reason="compares runs that differ only in the sub-cycling, so the flow must "
+                           "repeat bit for bit: on a GPU two runs of this scene differ by ~1e-2 K "
+                           "(docs/long-runs.md)")
 def test_subcycling_error_shrinks_with_the_interval():
     # the output interval holds 11151 = 27 x 413 mechanical steps; sub-cycling factors that
     # divide it keep the outputs on thermal-step boundaries

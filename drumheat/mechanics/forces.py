@@ -125,6 +125,35 @@ def _materialize(tree, pred):
                         lambda t: jax.tree_util.tree_map(jnp.zeros_like, t), tree)
 
 
+def _scatter_pairs(f, tq_i, tq_j, i, j, n):
+    """``(sums, f)``: forces and torques of the pairs summed into their particles, shape
+    (N, dim + torque components): ``-f`` and ``tq_i`` at i, ``f`` and ``tq_j`` at j (padding
+    index n dropped); and ``f`` for later use (on the CPU the materialised one).
+
+    The form is chosen per platform when the step is compiled (``platform_dependent``):
+
+    * CPU: one scatter over both ends (the same additions in the same order as two scatters),
+      its update materialised first (:func:`_materialize`), else XLA:CPU fuses the contact
+      law into the concatenation and recomputes it once per output column;
+    * other platforms (GPU): one scatter per end, into which XLA fuses the contact law; the
+      concatenated (2M, dim + torque) update is never written to memory (faster and smaller
+      on an H100: docs/performance.md, GPU).
+    """
+    tcol = (lambda a: a[:, None]) if tq_i.ndim == 1 else (lambda a: a)
+
+    def one_scatter(f, tq_i, tq_j):
+        f, tq_i, tq_j = _materialize((f, tq_i, tq_j), i[0] <= n)
+        upd = jnp.concatenate([jnp.concatenate([-f, tcol(tq_i)], axis=1),
+                               jnp.concatenate([f, tcol(tq_j)], axis=1)])
+        return jax.ops.segment_sum(upd, jnp.concatenate([i, j]), n), f
+
+    def scatter_per_end(f, tq_i, tq_j):
+        return (jax.ops.segment_sum(jnp.concatenate([-f, tcol(tq_i)], axis=1), i, n)
+                + jax.ops.segment_sum(jnp.concatenate([f, tcol(tq_j)], axis=1), j, n)), f
+
+    return jax.lax.platform_dependent(f, tq_i, tq_j, cpu=one_scatter, default=scatter_per_end)
+
+
 class ContactForces:
     """Contact forces of particles and walls, one call per step (build with
     :func:`make_contact_forces`).
@@ -342,8 +371,8 @@ class JaxContactForces(ContactForces):
                           dissipation=heat)
         f = res.force
         m_r = None
-        seg = jnp.concatenate([i, j])  # padding N is dropped by segment_sum
         if not self.rotation:
+            seg = jnp.concatenate([i, j])  # padding N is dropped by segment_sum
             force = force + jax.ops.segment_sum(jnp.concatenate([-f, f]), seg, n)
         else:
             tq_i = cross_a_f(a_i, -f)
@@ -360,14 +389,7 @@ class JaxContactForces(ContactForces):
                 tq_i = tq_i - m_r
                 roll_rate = rolling_loss(m_r, wj - wi, ii_ * ij_ / (ii_ + ij_), self.dt_c,
                                          dim == 3) if heat else None
-            # forces and torques in one scatter (the same additions in the same order as two
-            # scatters); the barrier keeps XLA from fusing the contact law into the
-            # concatenation, where it would be recomputed once per output column
-            tcol = (lambda a: a[:, None]) if tq_i.ndim == 1 else (lambda a: a)
-            f, tq_i, tq_j = _materialize((f, tq_i, tq_j), i[0] <= n)
-            upd = jnp.concatenate([jnp.concatenate([-f, tcol(tq_i)], axis=1),
-                                   jnp.concatenate([f, tcol(tq_j)], axis=1)])
-            tot = jax.ops.segment_sum(upd, seg, n)
+            tot, f = _scatter_pairs(f, tq_i, tq_j, i, j, n)
             force = force + tot[:, :dim]
             torque = torque + (tot[:, dim] if tq_i.ndim == 1 else tot[:, dim:])
         rmin_pair = jnp.minimum(ri, rj)

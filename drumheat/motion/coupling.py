@@ -142,10 +142,11 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
         Wall id (index into the wall effect's temperatures) of each primitive; default 0 for
         all (a drum whose only heated wall is the shell).
     """
-    valid = idx[0] < n
-    i = jnp.where(valid, idx[0], 0)
-    j = jnp.where(valid, idx[1], 0)
-    w_pair = jnp.where(valid, pair_time / h, 0.0)
+    # the padding slots keep their index n (ContactNetwork: dropped by the effects' scatters);
+    # pointed at particle 0 instead, each would add its zero into particle 0, and a GPU
+    # serialises those atomic adds (docs/performance.md, GPU)
+    i, j = idx[0], idx[1]
+    w_pair = jnp.where(i < n, pair_time / h, 0.0)
     wp = jnp.repeat(jnp.arange(n), n_walls)
     wk = jnp.tile(jnp.arange(n_walls), n)
     w_wall = wall_time / h * wall_heated[wk]

@@ -93,7 +93,8 @@ class Recording:
         self.n_intervals = len(rec["pair_ptr"]) - 1
         self.n = int(rec["n_particles"])
         i, j, w = _pad_csr(rec["pair_ptr"], (rec["pair_i"], rec["pair_j"],
-                                             rec["pair_duration"] / self.tau), (0, 0, 0.0), None)
+                                             rec["pair_duration"] / self.tau),
+                               (self.n, self.n, 0.0), None)  # padding index n: ContactNetwork
         heated = np.asarray(rec["wall_heated"], float)[rec["wall_index"]]
         # wall id of each contact (drums with internals book each surface separately)
         ids = (np.asarray(rec["wall_ids"], np.int32)[rec["wall_index"]] if "wall_ids" in rec

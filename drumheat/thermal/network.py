@@ -23,7 +23,11 @@ class ContactNetwork(eqx.Module):
     Attributes
     ----------
     pair_i, pair_j : int array, shape (P,)
-        Particle indices of each particle-particle contact, each contact once.
+        Particle indices of each particle-particle contact, each contact once. An index N
+        (one past the last particle) marks an unused slot as well as a weight 0 does: the
+        effects' scatters drop it and their gathers clamp it (JAX's default modes). Padding
+        of many slots should use it rather than a real particle: a GPU serialises the atomic
+        adds of many slots into one particle.
     pair_weight : float array, shape (P,)
         Contact-time fraction in [0, 1]; 0 marks an unused slot.
     wall_particle : int array, shape (W,)

@@ -1,0 +1,121 @@
+"""Does the particles' order in memory matter? glass-drum-3d through the product path (C++ loop).
+
+The contact loop reads the data of both partners of every listed pair; how far apart in memory
+neighbours lie decides how often that misses the cache. Two measurements:
+
+* ``--orders asis random morton`` (default): the scene's poured bed at N (the pour numbers the
+  particles by height, as it fills the insertion sites lowest first), the same bed with the
+  particles numbered at random, and numbered along a Morton curve of 8 mm cells. Each is given
+  to the scene as a packing file, run 300 steps, then: the median |i - j| of the listed pairs,
+  the contact call (best of 7 loops of 200 calls, as ``profile_scene_step.py``) and a run of
+  1000 steps (particle-steps/s).
+* ``--revolutions R``: the poured bed run for R drum revolutions in chunks of ``--chunk``
+  steps, printing each chunk's rate and the median |i - j| as the turning bed mixes.
+
+Usage: python scripts/bench_particle_order.py [--n 10000] [--orders asis random morton]
+       python scripts/bench_particle_order.py --n 10000 --revolutions 1.2 [--chunk 20000]
+The packings are cached in ``--packing-cache`` (bench_vs_liggghts.py's).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from bench_vs_liggghts import D_P, scene_for, scene_packing
+from machine import cpu_ticks, steal_percent
+from profile_scene_step import loops
+
+
+def morton_order(pos, cell=D_P):
+    """Permutation that numbers the particles along a Morton (Z-order) curve of cubic cells."""
+    c = np.floor((pos - pos.min(0)) / cell).astype(np.uint64)
+    code = np.zeros(len(pos), np.uint64)
+    for bit in range(16):
+        for k in range(pos.shape[1]):
+            one = (c[:, k] >> np.uint64(bit)) & np.uint64(1)
+            code |= one << np.uint64(pos.shape[1] * bit + k)
+    return np.argsort(code, kind="stable")
+
+
+def locality(state, n) -> float:
+    """Median |i - j| over the listed pairs of the state's neighbour list."""
+    idx = np.asarray(state.nbrs.idx)
+    ok = idx[0] < n
+    return float(np.median(np.abs(idx[0][ok] - idx[1][ok])))
+
+
+def motion_for(n, packing):
+    from drumheat.motion import make_motion
+
+    return make_motion(scene_for(n, "cpu", packing))
+
+
+def orders(n, names, cache):
+    with np.load(scene_packing(n, cache)) as f:
+        pos = f["position"]
+    perms = {"asis": np.arange(n), "random": np.random.default_rng(0).permutation(n),
+             "morton": morton_order(pos)}
+    tmp = Path(tempfile.mkdtemp())
+    print(f"| N | order | median abs(i - j) | contact call (ms) | run (particle-steps/s) | steal |")
+    print("|---|---|---|---|---|---|")
+    for name in names:
+        path = tmp / f"{name}.npz"
+        np.savez(path, position=pos[perms[name]], diameter=np.full(n, D_P),
+                 group=np.zeros(n, int))
+        motion = motion_for(n, path)
+        dem = motion.dem
+        state = dem.run(motion.initial_state(), 300, chunk=300)
+        contact = loops(dem)["contact"]
+        k = jnp.asarray(200, jnp.int32)
+        jax.block_until_ready(contact(state, k))
+        c0, best = cpu_ticks(), float("inf")
+        for _ in range(7):
+            t0 = time.perf_counter()
+            jax.block_until_ready(contact(state, k))
+            best = min(best, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        jax.block_until_ready(dem.run(state, 1000, chunk=1000).position)
+        rate = n * 1000 / (time.perf_counter() - t0)
+        print(f"| {n} | {name} | {locality(state, n):.0f} | {1e3 * best / 200:.3f} | {rate:.3g} "
+              f"| {steal_percent(c0, cpu_ticks()):.0f} % |", flush=True)
+
+
+def revolutions(n, revs, chunk, cache):
+    motion = motion_for(n, scene_packing(n, cache))
+    dem = motion.dem
+    state = dem.run(motion.initial_state(), 300, chunk=300)
+    period = 60.0 / float(motion.scene.drum.rpm)
+    while float(state.time) < revs * period:
+        c0, t0 = cpu_ticks(), time.perf_counter()
+        state = dem.run(state, chunk, chunk=chunk)
+        jax.block_until_ready(state.position)
+        wall = time.perf_counter() - t0
+        print(f"{float(state.time) / period:5.2f} rev: {n * chunk / wall:.3g} particle-steps/s, "
+              f"median abs(i - j) {locality(state, n):.0f}, steal "
+              f"{steal_percent(c0, cpu_ticks()):.0f} %", flush=True)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, default=10000)
+    ap.add_argument("--orders", nargs="+", default=["asis", "random", "morton"],
+                    choices=["asis", "random", "morton"])
+    ap.add_argument("--revolutions", type=float, default=0.0)
+    ap.add_argument("--chunk", type=int, default=20000)
+    ap.add_argument("--packing-cache", default="/tmp/drumheat_packings")
+    args = ap.parse_args()
+    if args.revolutions > 0:
+        revolutions(args.n, args.revolutions, args.chunk, args.packing_cache)
+    else:
+        orders(args.n, args.orders, args.packing_cache)
+
+
+if __name__ == "__main__":
+    main()
