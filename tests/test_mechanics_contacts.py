@@ -1,5 +1,5 @@
 """Contact laws against analytic answers: restitution, incline stick/slide/roll, resting weight,
-energy conservation, critical time step."""
+energy conservation, critical time step; and the two forms of the JAX kernel's force scatter."""
 
 import math
 
@@ -232,3 +232,32 @@ def test_rolling_resistance_stops_rolling_oscillation():
     # of a few um/s here (documented in contact_forces.rolling_torque)
     assert out[0.05][0] < 0.05 * (R - r)
     assert out[0.05][1] < 1e-5
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_both_forms_of_the_pair_scatter_give_the_same_sums(dim):
+    # the JAX kernel sums the pairs' forces and torques into the particles with one scatter on
+    # the CPU and one scatter per end on GPUs (forces._scatter_pairs picks by platform); the
+    # suite runs on the CPU, so the GPU form is checked here against the CPU form and a loop
+    import jax.numpy as jnp
+
+    from drumheat.mechanics.forces import _scatter_once, _scatter_per_end
+
+    rng = np.random.default_rng(dim)
+    n, m, padding = 40, 300, 60
+    i, j = np.sort(rng.integers(0, n, (2, m)), axis=0)
+    i[-padding:] = j[-padding:] = n
+    order = np.lexsort((j, i))
+    i, j = i[order], j[order]
+    tq_shape = (m, 3) if dim == 3 else (m,)
+    f, tq_i, tq_j = (rng.normal(size=s) for s in ((m, dim), tq_shape, tq_shape))
+    ref = np.zeros((n, dim + (3 if dim == 3 else 1)))
+    for k in range(m - padding):
+        ref[i[k]] += np.concatenate([-f[k], np.atleast_1d(tq_i[k])])
+        ref[j[k]] += np.concatenate([f[k], np.atleast_1d(tq_j[k])])
+    args = (jnp.asarray(f), jnp.asarray(tq_i), jnp.asarray(tq_j), jnp.asarray(i, jnp.int32),
+            jnp.asarray(j, jnp.int32), n)
+    for form in (_scatter_once, _scatter_per_end):
+        sums, f_out = form(*args)
+        np.testing.assert_allclose(sums, ref, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(f_out, f)

@@ -125,6 +125,26 @@ def _materialize(tree, pred):
                         lambda t: jax.tree_util.tree_map(jnp.zeros_like, t), tree)
 
 
+def _torque_columns(tq):
+    """A torque as columns of the scatter update: (M, 1) for 2D's scalar torque."""
+    return tq[:, None] if tq.ndim == 1 else tq
+
+
+def _scatter_once(f, tq_i, tq_j, i, j, n):
+    """:func:`_scatter_pairs` as one scatter over both ends, its update materialised first
+    (the CPU form)."""
+    f, tq_i, tq_j = _materialize((f, tq_i, tq_j), i[0] <= n)
+    upd = jnp.concatenate([jnp.concatenate([-f, _torque_columns(tq_i)], axis=1),
+                           jnp.concatenate([f, _torque_columns(tq_j)], axis=1)])
+    return jax.ops.segment_sum(upd, jnp.concatenate([i, j]), n), f
+
+
+def _scatter_per_end(f, tq_i, tq_j, i, j, n):
+    """:func:`_scatter_pairs` as one scatter per end (the form for GPUs)."""
+    return (jax.ops.segment_sum(jnp.concatenate([-f, _torque_columns(tq_i)], axis=1), i, n)
+            + jax.ops.segment_sum(jnp.concatenate([f, _torque_columns(tq_j)], axis=1), j, n)), f
+
+
 def _scatter_pairs(f, tq_i, tq_j, i, j, n):
     """``(sums, f)``: forces and torques of the pairs summed into their particles, shape
     (N, dim + torque components): ``-f`` and ``tq_i`` at i, ``f`` and ``tq_j`` at j (padding
@@ -132,26 +152,17 @@ def _scatter_pairs(f, tq_i, tq_j, i, j, n):
 
     The form is chosen per platform when the step is compiled (``platform_dependent``):
 
-    * CPU: one scatter over both ends (the same additions in the same order as two scatters),
-      its update materialised first (:func:`_materialize`), else XLA:CPU fuses the contact
-      law into the concatenation and recomputes it once per output column;
-    * other platforms (GPU): one scatter per end, into which XLA fuses the contact law; the
-      concatenated (2M, dim + torque) update is never written to memory (faster and smaller
-      on an H100: docs/performance.md, GPU).
+    * CPU (:func:`_scatter_once`): one scatter over both ends (the same additions in the same
+      order as two scatters), its update materialised first (:func:`_materialize`), else
+      XLA:CPU fuses the contact law into the concatenation and recomputes it once per output
+      column;
+    * other platforms, GPUs (:func:`_scatter_per_end`): one scatter per end, into which XLA
+      fuses the contact law; the concatenated (2M, dim + torque) update is never written to
+      memory (faster and smaller on an H100: docs/performance.md, GPU).
     """
-    tcol = (lambda a: a[:, None]) if tq_i.ndim == 1 else (lambda a: a)
-
-    def one_scatter(f, tq_i, tq_j):
-        f, tq_i, tq_j = _materialize((f, tq_i, tq_j), i[0] <= n)
-        upd = jnp.concatenate([jnp.concatenate([-f, tcol(tq_i)], axis=1),
-                               jnp.concatenate([f, tcol(tq_j)], axis=1)])
-        return jax.ops.segment_sum(upd, jnp.concatenate([i, j]), n), f
-
-    def scatter_per_end(f, tq_i, tq_j):
-        return (jax.ops.segment_sum(jnp.concatenate([-f, tcol(tq_i)], axis=1), i, n)
-                + jax.ops.segment_sum(jnp.concatenate([f, tcol(tq_j)], axis=1), j, n)), f
-
-    return jax.lax.platform_dependent(f, tq_i, tq_j, cpu=one_scatter, default=scatter_per_end)
+    return jax.lax.platform_dependent(
+        f, tq_i, tq_j, cpu=lambda *a: _scatter_once(*a, i, j, n),
+        default=lambda *a: _scatter_per_end(*a, i, j, n))
 
 
 class ContactForces:
