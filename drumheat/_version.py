@@ -2,4 +2,6 @@
 
 # dev1: the contact-time accumulators of the coupled heat fold at the thermal steps, so a
 # checkpoint of dev0 would be read wrongly: its version refuses it
-__version__ = "0.2.0.dev1"
+# dev2: a coupled run that records no contacts carries no recording accumulators (a state of
+# another layout): a checkpoint of dev1 is refused
+__version__ = "0.2.0.dev2"

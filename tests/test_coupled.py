@@ -106,6 +106,35 @@ def test_resting_dem_bed_matches_the_static_model(gap):
                                rtol=0, atol=1e-12)
 
 
+def test_a_run_that_records_nothing_carries_no_recording_accumulators():
+    # without dem.record_interval the coupled state leaves the recording's per-pair and
+    # per-wall-slot accumulators out (one float64 per slot less to carry, remap and fold);
+    # the temperatures, accounts and contact count are those of a state that carries them,
+    # bit for bit, through rebuilds and thermal sub-steps
+    from drumheat.motion.coupling import contact_count, initial_extra, recorded_times
+
+    scene = dem_scene(**{"dem.thermal_substeps": 3})
+    bed = make_motion(scene)
+    assert bed.initial_state().extra.pair.rec_time is None
+    model, T0 = bed.model()
+    T = T0 + jnp.linspace(0.0, 3.0, 30)
+    dem = bed.dem
+    start = dem.init(bed.packing_positions())
+    cap = start.nbrs.idx.shape[1]
+    runs = [dem.run(start._replace(extra=initial_extra(model, T, cap, 30, len(bed.walls),
+                                                       record=record)), 3001)
+            for record in (True, False)]
+    assert runs[0].n_rebuilds > 0 and runs[1].extra.rec_wall_time is None
+    np.testing.assert_array_equal(runs[0].extra.T, runs[1].extra.T)
+    assert {a: float(q) for a, q in runs[0].extra.Q.items()} == \
+        {a: float(q) for a, q in runs[1].extra.Q.items()}
+    heated = bed.wall_heated
+    assert contact_count(runs[0].extra, heated) == contact_count(runs[1].extra, heated)
+    assert float(jnp.sum(recorded_times(runs[0].extra)[0])) > 0
+    with pytest.raises(ValueError, match="records no contact times"):
+        recorded_times(runs[1].extra)
+
+
 def test_padding_slots_of_the_thermal_network_add_nothing():
     # the DEM's contact network keeps the neighbour list's padding index n (dropped by the
     # effects' scatters, clamped by their gathers) rather than pointing the padding at a real

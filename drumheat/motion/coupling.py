@@ -43,10 +43,11 @@ class PairTimes(NamedTuple):
     the last thermal step (while ``k = 0`` still that of the last thermal step, which the next
     step overwrites); ``rec_time`` from the start of the recording interval to the last
     thermal step (:func:`recorded_times` adds ``time``; negative: the recording started
-    after the last thermal step, :func:`reset_record`)."""
+    after the last thermal step, :func:`reset_record`); None in a run that records no
+    contacts (:func:`initial_extra` with ``record=False``)."""
 
     time: jax.Array
-    rec_time: jax.Array
+    rec_time: Optional[jax.Array]
 
 
 class ContactCount(NamedTuple):
@@ -78,7 +79,8 @@ class CoupledHeat(PairCarried):
     leaves (``eqx.partition(m, eqx.is_array)[0]``). k: steps since the last thermal step.
     wall_time, rec_wall_time: (N * n_walls,) s, contact time per particle-wall slot since the
     last thermal step and from the start of the recording interval to the last thermal step
-    (as ``time`` and ``rec_time`` of :class:`PairTimes`). pair: :class:`PairTimes`. count:
+    (as ``time`` and ``rec_time`` of :class:`PairTimes`; ``rec_wall_time`` None, as
+    ``rec_time``, in a run that records no contacts). pair: :class:`PairTimes`. count:
     :class:`ContactCount`. Optional (None when the run has none): Q_walls (n_walls,) J, the
     heat each wall primitive gave (``per_wall``); wall: the drum wall's segments
     (``[heat.drum_wall]``, :meth:`drumheat.thermal.drum_wall.DrumWall.initial`); friction: a
@@ -90,7 +92,7 @@ class CoupledHeat(PairCarried):
     model: Any
     k: jax.Array
     wall_time: jax.Array
-    rec_wall_time: jax.Array
+    rec_wall_time: Optional[jax.Array]
     pair: PairTimes
     count: ContactCount
     Q_walls: Optional[jax.Array] = None
@@ -109,7 +111,7 @@ class CoupledHeat(PairCarried):
         thermal step of the pairs the list drops stays in the count (:func:`contact_count`
         reads the same before and after)."""
         pair, count, k = arrays
-        new = PairTimes(*(remap(a) for a in pair))
+        new = PairTimes(*(None if a is None else remap(a) for a in pair))
         dropped = jnp.where(k > 0, jnp.sum(pair.time) - jnp.sum(new.time), 0.0)
         return new, count._replace(pair=count.pair + dropped), k
 
@@ -192,10 +194,12 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
 
     def fold(extra):
         """``extra`` with the contact times since the last thermal step added to the
-        recording's and the output interval's accumulators."""
+        recording's (if the run records) and the output interval's accumulators."""
+        extra = extra.replace(count=_count(extra, slot_heated))
+        if extra.pair.rec_time is None:
+            return extra
         pair = extra.pair._replace(rec_time=extra.pair.rec_time + extra.pair.time)
-        return extra.replace(pair=pair, rec_wall_time=extra.rec_wall_time + extra.wall_time,
-                             count=_count(extra, slot_heated))
+        return extra.replace(pair=pair, rec_wall_time=extra.rec_wall_time + extra.wall_time)
 
     def thermal_step(extra, ops):
         idx = ops[0] if drum_wall else ops
@@ -272,13 +276,17 @@ def drum_wall_step(m: ThermalModel, extra: CoupledHeat, net: ContactNetwork, pos
 
 
 def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
-                  per_wall: bool = False, accounts=(), friction: bool = False) -> CoupledHeat:
+                  per_wall: bool = False, accounts=(), friction: bool = False,
+                  record: bool = True) -> CoupledHeat:
     """The thermal part of the DEM state at t = 0.
 
     ``per_wall`` adds the per-primitive heat ``Q_walls`` (n_walls,) J; ``accounts`` adds
     further heat accounts (J, zero at t = 0) that an open boundary books into ``Q`` (e.g. the
     enthalpy carried in by recycled particles); ``friction`` the account ``friction`` and the
-    friction-heat accumulators (:func:`make_thermal_update`).
+    friction-heat accumulators (:func:`make_thermal_update`). ``record=False``: the run
+    records no contacts, so the recording's accumulators (:func:`recorded_times`) are left
+    out (None): one float64 per pair slot and per particle-wall slot less in the state, in
+    every neighbour rebuild's remap and in every thermal step.
     """
     if friction:
         accounts = tuple(accounts) + ("friction",)
@@ -292,7 +300,8 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
         T=jnp.asarray(T0, float),
         Q={a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)},
         model=eqx.partition(model, eqx.is_array)[0], k=jnp.asarray(0, jnp.int32), wall_time=z,
-        rec_wall_time=z, pair=PairTimes(jnp.zeros(capacity), jnp.zeros(capacity)),
+        rec_wall_time=z if record else None,
+        pair=PairTimes(jnp.zeros(capacity), jnp.zeros(capacity) if record else None),
         count=ContactCount(zero, zero), Q_walls=jnp.zeros(n_walls) if per_wall else None,
         # [heat.drum_wall]: the segments' temperatures and accounts
         wall=model.drum_wall.initial() if model.drum_wall is not None else None,
@@ -323,7 +332,11 @@ def _count(extra, slot_heated) -> ContactCount:
 
 def recorded_times(extra):
     """``(pair (M,), wall (N * n_walls,))``: the contact time of each neighbour pair and of
-    each particle-wall slot since :func:`reset_record`, s."""
+    each particle-wall slot since :func:`reset_record`, s (a state made with ``record=True``,
+    :func:`initial_extra`)."""
+    if extra.pair.rec_time is None:
+        raise ValueError("this coupled-heat state records no contact times (initial_extra "
+                         "with record=False)")
     pair, wall = _since_thermal_step(extra)
     return extra.pair.rec_time + pair, extra.rec_wall_time + wall
 
@@ -337,7 +350,9 @@ def contact_count(extra, wall_heated) -> ContactCount:
 def reset_record(extra):
     """``extra`` with the contact times of the recording (:func:`recorded_times`) set to zero:
     the accumulators take minus the time since the last thermal step, which the next thermal
-    step adds."""
+    step adds. Unchanged in a state that records nothing."""
+    if extra.pair.rec_time is None:
+        return extra
     pair, wall = _since_thermal_step(extra)
     return extra.replace(pair=extra.pair._replace(rec_time=-pair), rec_wall_time=-wall)
 

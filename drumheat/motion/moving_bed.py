@@ -304,7 +304,7 @@ class MovingBed(DEMMotion):
         state = self.dem.init(self.packing_positions())
         cap = state.nbrs.idx.shape[1]
         extra = initial_extra(model, T0, cap, self.n, self.n_walls, per_wall=True,
-                              accounts=("inflow",))
+                              accounts=("inflow",), record=False)  # records no contacts
         return state._replace(extra=extra.replace(flow=self.initial_flow()))
 
     def advance(self, state, t0, t1):
