@@ -255,7 +255,7 @@ def test_any_order_of_the_pair_slots(monkeypatch):
     forces and heat flows to round-off (the sums run in another order); also in three chunks."""
     import dataclasses
 
-    jdem, st = _bed(3, jnp.float64, "jax", "overlap", 0.05)
+    st = _bed(3, jnp.float64, "jax", "overlap", 0.05)[1]
     cdem = _bed(3, jnp.float64, "cpu", "overlap", 0.05)[0]
     perm = np.random.default_rng(3).permutation(st.nbrs.idx.shape[1])
     assert np.any(np.diff(np.asarray(st.nbrs.idx[0])[perm]) < 0)  # not sorted by i

@@ -125,24 +125,25 @@ def _materialize(tree, pred):
                         lambda t: jax.tree_util.tree_map(jnp.zeros_like, t), tree)
 
 
-def _torque_columns(tq):
-    """A torque as columns of the scatter update: (M, 1) for 2D's scalar torque."""
-    return tq[:, None] if tq.ndim == 1 else tq
+def _pair_updates(f, tq_i, tq_j):
+    """The scatter updates of the two ends of every pair: ``(-f | tq_i, f | tq_j)``, each
+    (M, dim + torque components) (2D's scalar torque as one column)."""
+    col = (lambda a: a[:, None]) if tq_i.ndim == 1 else (lambda a: a)
+    return (jnp.concatenate([-f, col(tq_i)], axis=1), jnp.concatenate([f, col(tq_j)], axis=1))
 
 
 def _scatter_once(f, tq_i, tq_j, i, j, n):
     """:func:`_scatter_pairs` as one scatter over both ends, its update materialised first
     (the CPU form)."""
     f, tq_i, tq_j = _materialize((f, tq_i, tq_j), i[0] <= n)
-    upd = jnp.concatenate([jnp.concatenate([-f, _torque_columns(tq_i)], axis=1),
-                           jnp.concatenate([f, _torque_columns(tq_j)], axis=1)])
+    upd = jnp.concatenate(_pair_updates(f, tq_i, tq_j))
     return jax.ops.segment_sum(upd, jnp.concatenate([i, j]), n), f
 
 
 def _scatter_per_end(f, tq_i, tq_j, i, j, n):
     """:func:`_scatter_pairs` as one scatter per end (the form for GPUs)."""
-    return (jax.ops.segment_sum(jnp.concatenate([-f, _torque_columns(tq_i)], axis=1), i, n)
-            + jax.ops.segment_sum(jnp.concatenate([f, _torque_columns(tq_j)], axis=1), j, n)), f
+    upd_i, upd_j = _pair_updates(f, tq_i, tq_j)
+    return jax.ops.segment_sum(upd_i, i, n) + jax.ops.segment_sum(upd_j, j, n), f
 
 
 def _scatter_pairs(f, tq_i, tq_j, i, j, n):

@@ -62,7 +62,7 @@ from drumheat.models.moving_bed import BETA_HOPPER, lmtd
 from drumheat.motion.base import register
 from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.coupling import (contact_count, initial_extra, make_thermal_update,
-                                      reset_count, reset_record)
+                                      reset_count)
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene, SceneError
 
@@ -308,7 +308,7 @@ class MovingBed(DEMMotion):
         return state._replace(extra=extra.replace(flow=self.initial_flow()))
 
     def advance(self, state, t0, t1):
-        start = state._replace(extra=reset_count(reset_record(state.extra), self.wall_heated),
+        start = state._replace(extra=reset_count(state.extra, self.wall_heated),
                                max_overlap=jnp.zeros_like(state.max_overlap))
         return self.dem.run_steps(start, int(round((t1 - t0) / self.dt)))
 
