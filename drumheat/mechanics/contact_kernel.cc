@@ -107,10 +107,12 @@ constexpr int64_t MIN_CHUNK = 8000;  // listed pairs per chunk at least (below: 
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kTables = 6;  // kn, kt, zeta_n, zeta_t, mu, mu_roll
 
-// the parameters of one material pair (one entry of the contact tables)
+// the parameters of one material pair (one entry of the contact tables); gn = 2 zeta_n sqrt(k_n)
+// and gt = 2 zeta_t sqrt(k_t), the dashpots' factors of sqrt(m*) (computed once here, the same
+// numbers as in the law: (2 zeta) sqrt(k) is the product's first two factors there too)
 template <typename S>
 struct Law {
-  S kn, kt, zn, zt, mu, mur, sqkn, sqkt;
+  S kn, kt, gn, gt, mu, mur;
 };
 
 // tables (6, A, B) -> A * B laws
@@ -120,8 +122,8 @@ std::vector<Law<S>> laws(const S* tab, int64_t a, int64_t b) {
   std::vector<Law<S>> out(ab);
   for (int64_t q = 0; q < ab; ++q) {
     const S kn = tab[q], kt = tab[ab + q];
-    out[q] = Law<S>{kn, kt, tab[2*ab + q], tab[3*ab + q], tab[4*ab + q], tab[5*ab + q],
-                    std::sqrt(kn), std::sqrt(kt)};
+    out[q] = Law<S>{kn, kt, S(2)*tab[2*ab + q]*std::sqrt(kn), S(2)*tab[3*ab + q]*std::sqrt(kt),
+                    tab[4*ab + q], tab[5*ab + q]};
   }
   return out;
 }
@@ -137,43 +139,48 @@ inline S dot(const S* a, const S* b) {
 // from A to B, overlap ov > 0, relative velocity vr of B's contact point against A's, effective
 // mass me, old spring so. Writes the new spring to s (which may be so: the springs are updated
 // in place) and returns the normal force F_n; f receives the force on B. With loss (friction
-// heat) loss[0] += the dashpots' loss and loss[1] += the Coulomb limit's of the step, J
-// (contact_law(dissipation=True): damping_loss, slip_loss).
+// heat) loss[0] = the dashpots' loss and loss[1] = the Coulomb limit's of the step (0 while
+// sticking), J (contact_law(dissipation=True): damping_loss, slip_loss).
+// Without branches on the numbers (both the sliding and the sticking force are computed and one
+// is selected; a quotient that a branch would have skipped may be inf or NaN and is never
+// selected): no mispredicted branch per contact, and the compiler can run a loop of contacts in
+// vector instructions (pair_law_tile); every selected number is computed as before.
 template <typename S, int D>
 inline S contact(const Law<S>& c, S dt, const S* n, S ov, const S* vr, S me, const S* so, S* s,
-                 S* f, double* loss = nullptr) {
+                 S* f, S* loss = nullptr) {
   const S sqm = std::sqrt(me);
   const S vn = dot<S, D>(vr, n);  // > 0: separating
-  S fn = c.kn*ov - S(2)*c.zn*c.sqkn*sqm*vn;  // k_n delta + gamma_n d(delta)/dt
-  if (fn < S(0)) fn = S(0);  // never attractive
-  S vt[D], xp[D], x[D], fs[D], ft[D];
+  S fn = c.kn*ov - c.gn*sqm*vn;  // k_n delta + gamma_n d(delta)/dt
+  fn = fn < S(0) ? S(0) : fn;  // never attractive
+  S vt[D], xp[D], x[D], fs[D], ft[D], slip[D];
   for (int a = 0; a < D; ++a) vt[a] = vr[a] - vn*n[a];
   // rotate the old spring onto the current tangent plane, keeping its length
   const S xin = dot<S, D>(so, n);
   for (int a = 0; a < D; ++a) xp[a] = so[a] - xin*n[a];
   const S lo = std::sqrt(dot<S, D>(so, so));
   const S lp = std::sqrt(dot<S, D>(xp, xp));
-  const S sc = lp > S(0) ? lo / lp : S(1);
+  const S q = lo / lp;
+  const S sc = lp > S(0) ? q : S(1);
   for (int a = 0; a < D; ++a) { x[a] = xp[a]*sc + vt[a]*dt; fs[a] = -c.kt*x[a]; }
   const S fl = std::sqrt(dot<S, D>(fs, fs));
   const S fc = c.mu*fn;
-  if (fl > fc) {  // sliding: the spring is kept at the Coulomb limit, no tangential dashpot
-    const S ratio = fc / fl;
-    S slip[D];
-    for (int a = 0; a < D; ++a) {
-      ft[a] = fs[a]*ratio;
-      const S xl = -ft[a]/c.kt;
-      slip[a] = x[a] - xl;
-      x[a] = xl;
-    }
-    if (loss) {
-      loss[0] += double((c.kn*ov - fn)*vn*dt);
-      loss[1] += double(fc*std::sqrt(dot<S, D>(slip, slip)));
-    }
-  } else {
-    const S gt = S(2)*c.zt*c.sqkt*sqm;
-    for (int a = 0; a < D; ++a) ft[a] = fs[a] - gt*vt[a];
-    if (loss) loss[0] += double(((c.kn*ov - fn)*vn + gt*dot<S, D>(vt, vt))*dt);
+  // sliding (fl > fc): the spring is kept at the Coulomb limit, no tangential dashpot
+  const bool slide = fl > fc;
+  const S ratio = fc / fl;
+  const S gt = c.gt*sqm;
+  for (int a = 0; a < D; ++a) {
+    const S fsl = fs[a]*ratio;
+    const S xl = -fsl/c.kt;
+    slip[a] = x[a] - xl;
+    ft[a] = slide ? fsl : fs[a] - gt*vt[a];
+    x[a] = slide ? xl : x[a];
+  }
+  if (loss) {
+    const S damped = (c.kn*ov - fn)*vn;
+    const S sliding = damped*dt, sticking = (damped + gt*dot<S, D>(vt, vt))*dt;
+    const S slipped = fc*std::sqrt(dot<S, D>(slip, slip));
+    loss[0] = slide ? sliding : sticking;
+    loss[1] = slide ? slipped : S(0);
   }
   for (int a = 0; a < D; ++a) { s[a] = x[a]; f[a] = fn*n[a] + ft[a]; }  // so not read after
   return fn;
@@ -200,11 +207,11 @@ inline void rolling(const S* w, S fn, S reff, S mur, S ieff, S dt, S* M) {
 // contact_forces.rolling_loss: the energy the rolling torque M takes from the relative spin w
 // in one step, |M| dt max(|w| - |M| dt / (2 I*), 0), J
 template <typename S, int DW>
-inline double rolling_loss(const S* M, const S* w, S ieff, S dt) {
+inline S rolling_loss(const S* M, const S* w, S ieff, S dt) {
   S mm = M[0]*M[0], ww = w[0]*w[0];
   if constexpr (DW == 3) { mm += M[1]*M[1] + M[2]*M[2]; ww += w[1]*w[1] + w[2]*w[2]; }
   const S m = std::sqrt(mm), rest = std::sqrt(ww) - S(0.5)*m*dt/ieff;
-  return double(m*dt*(rest > S(0) ? rest : S(0)));
+  return m*dt*(rest > S(0) ? rest : S(0));
 }
 
 // w x a: a 3-vector in 3D; in 2D w is the z component: w e_z x a = w (-a_y, a_x)
@@ -220,16 +227,25 @@ inline void spin_cross(const S* w, const S* a, S* out) {
   }
 }
 
-// T += sign (a x f): a 3-vector in 3D, the z component in 2D
+// out = sign (a x f): a 3-vector in 3D, the z component in 2D
+template <typename S, int D>
+inline void torque(const S* a, const S* f, S sign, S* out) {
+  if constexpr (D == 3) {
+    out[0] = sign*(a[1]*f[2] - a[2]*f[1]);
+    out[1] = sign*(a[2]*f[0] - a[0]*f[2]);
+    out[2] = sign*(a[0]*f[1] - a[1]*f[0]);
+  } else {
+    out[0] = sign*(a[0]*f[1] - a[1]*f[0]);
+  }
+}
+
+// T += sign (a x f)
 template <typename S, int D>
 inline void add_torque(S* T, const S* a, const S* f, S sign) {
-  if constexpr (D == 3) {
-    T[0] += sign*(a[1]*f[2] - a[2]*f[1]);
-    T[1] += sign*(a[2]*f[0] - a[0]*f[2]);
-    T[2] += sign*(a[0]*f[1] - a[1]*f[0]);
-  } else {
-    T[0] += sign*(a[0]*f[1] - a[1]*f[0]);
-  }
+  constexpr int DW = D == 3 ? 3 : 1;
+  S t[DW];
+  torque<S, D>(a, f, sign, t);
+  for (int c = 0; c < DW; ++c) T[c] += t[c];
 }
 
 // a spring set to zero, written only where it is not all zero bits already (most slots touch
@@ -272,6 +288,146 @@ inline double conductance(int law, double h, double ri, double rj, double L) {
   const double area = -0.25 * kPi * (L - ri - rj) * (L + ri - rj) * (L - ri + rj) *
                       (L + ri + rj) / (L * L);
   return area > 0 ? h * std::sqrt(area) : 0.0;
+}
+
+// Friction heat, per contact (see the header): the spring energy before the step,
+// k_n delta_0^2 / 2 (while delta_0 > 0) + k_t |xi_old|^2 / 2, as ContactForces' _pair_work and
+// _spring_energy_and_rates compute it; xi2 = |xi_old|^2
+template <typename S>
+inline S energy_before(const Law<S>& c, S ov0, S xi2) {
+  return (ov0 > S(0) ? S(0.5)*c.kn*(ov0*ov0) : S(0)) + S(0.5)*c.kt*xi2;
+}
+
+// a contact that does not touch now: D = U_old; the tangential spring's energy is booked as
+// sliding (contact_law: the release of a contact that opens)
+template <typename S>
+inline void opened(const Law<S>& c, S ov0, S xi2, S* dU, double* R) {
+  *dU = -energy_before<S>(c, ov0, xi2);
+  R[1] += double(S(0.5)*c.kt*xi2);
+}
+
+// the overlap of a pair before the step, at the positions before the drift x - dt v (the JAX
+// kernel's `prev`), with the nearest periodic image of the last axis
+template <typename S, int D>
+inline S overlap_before(const S* xi, const S* xj, const S* vi, const S* vj, S rs, S dt, S L) {
+  S d0[D];
+  for (int c = 0; c < D; ++c) d0[c] = (xj[c] - dt*vj[c]) - (xi[c] - dt*vi[c]);
+  if constexpr (D == 3)
+    if (L > S(0)) d0[2] = d0[2] > S(0.5)*L ? d0[2] - L : (d0[2] < S(-0.5)*L ? d0[2] + L : d0[2]);
+  return rs - std::sqrt(dot<S, D>(d0, d0));
+}
+
+// The contact law of up to Tile::N pair slots within reach, one array per quantity (structure
+// of arrays): Loop::tile gathers the slots' data into it, pair_law_tile computes the law of all
+// of them in one loop without branches, which the compiler runs in vector instructions (several
+// contacts per instruction), and Loop::tile puts the results where Loop::pair would have put
+// them. 49 arrays of 64 (3D, float64; 61 with friction heat): 25 kB (31 kB), about the size of
+// a core's first-level cache.
+template <typename S, int D>
+struct Tile {
+  static constexpr int DW = D == 3 ? 3 : 1;
+  static constexpr int N = 64;
+  // gathered: the slot's geometry (d from i to j, |d|^2), radii, masses, moments of inertia
+  // (rolling only), velocities, spins, the old spring and the law of the material pair
+  alignas(64) S d[D][N], dist2[N], ri[N], rj[N], mi[N], mj[N], ii[N], ij[N];
+  alignas(64) S vi[D][N], vj[D][N], wi[DW][N], wj[DW][N], so[D][N];
+  alignas(64) S kn[N], kt[N], gn[N], gt[N], mu[N], mur[N];
+  // computed (meaningful where ov > 0): centre distance, overlap, normal force, the force on j,
+  // the new spring, the torques on i and j of the force and the rolling torque on j
+  alignas(64) S dist[N], ov[N], fn[N], f[D][N], s[D][N], ti[DW][N], tj[DW][N], M[DW][N];
+  // friction heat only: gathered, the overlap before the step and |old spring|^2; computed, the
+  // levers, the law's losses (dashpots, Coulomb limit), the rolling loss and U_new - U_old
+  alignas(64) S ov0[N], xi2[N], ai[D][N], aj[D][N], loss[2][N], lroll[N], du[N];
+};
+
+// x86-64: the loop of pair_law_tile compiled for AVX-512, AVX2 and the baseline (SSE2), the one
+// the processor runs chosen when the library is loaded. The results do not depend on which:
+// the same operations on every lane, no contraction into fused multiply-adds (-ffp-contract=off
+// in cpu_kernel.FLAGS), sqrt and division exactly rounded in every instruction set.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define DRUMHEAT_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define DRUMHEAT_VECTOR_CLONES
+#endif
+
+// the law of the tile's slots [0, cnt) (ROT: the torques, ROLL: rolling resistance, FH: what
+// friction heat needs)
+template <typename S, int D, bool ROT, bool ROLL, bool FH>
+DRUMHEAT_VECTOR_CLONES void pair_law_tile(Tile<S, D>& t, int cnt, S dt) {
+  constexpr int DW = Tile<S, D>::DW;
+  for (int q = 0; q < cnt; ++q) {
+    const S dist = std::sqrt(t.dist2[q]);
+    const S ri = t.ri[q], rj = t.rj[q];
+    const S ov = (ri + rj) - dist;
+    const S inv0 = S(1) / dist;
+    const S inv = dist > S(0) ? inv0 : S(0);
+    const S li = ri - S(0.5)*ov, lj = -(rj - S(0.5)*ov);
+    S nr[D], ai[D], aj[D], ci[D], cj[D], vr[D], so[D], s[D], f[D], wi[DW], wj[DW];
+    for (int c = 0; c < D; ++c) {
+      nr[c] = t.d[c][q]*inv; ai[c] = li*nr[c]; aj[c] = lj*nr[c]; so[c] = t.so[c][q];
+    }
+    for (int c = 0; c < DW; ++c) { wi[c] = t.wi[c][q]; wj[c] = t.wj[c][q]; }
+    spin_cross<S, D>(wi, ai, ci);
+    spin_cross<S, D>(wj, aj, cj);
+    for (int c = 0; c < D; ++c) vr[c] = (t.vj[c][q] + cj[c]) - (t.vi[c][q] + ci[c]);
+    const S mi = t.mi[q], mj = t.mj[q];
+    const Law<S> law{t.kn[q], t.kt[q], t.gn[q], t.gt[q], t.mu[q], t.mur[q]};
+    S loss[2];
+    const S fn = contact<S, D>(law, dt, nr, ov, vr, mi*mj/(mi + mj), so, s, f,
+                               FH ? loss : nullptr);
+    t.dist[q] = dist; t.ov[q] = ov; t.fn[q] = fn;
+    for (int c = 0; c < D; ++c) { t.f[c][q] = f[c]; t.s[c][q] = s[c]; }
+    if constexpr (FH) {
+      for (int c = 0; c < D; ++c) { t.ai[c][q] = ai[c]; t.aj[c][q] = aj[c]; }
+      t.loss[0][q] = loss[0]; t.loss[1][q] = loss[1];
+      t.du[q] = (S(0.5)*law.kn*(ov*ov) + S(0.5)*law.kt*dot<S, D>(s, s))
+                - energy_before<S>(law, t.ov0[q], t.xi2[q]);
+    }
+    if constexpr (ROT) {
+      S ti[DW], tj[DW];
+      torque<S, D>(ai, f, S(-1), ti);  // a_i x (-f)
+      torque<S, D>(aj, f, S(1), tj);   // a_j x f
+      for (int c = 0; c < DW; ++c) { t.ti[c][q] = ti[c]; t.tj[c][q] = tj[c]; }
+    }
+    if constexpr (ROLL) {
+      S wr[DW], M[DW];
+      for (int c = 0; c < DW; ++c) wr[c] = wj[c] - wi[c];
+      const S ii = t.ii[q], ij = t.ij[q], ieff = ii*ij/(ii + ij);
+      rolling<S, DW>(wr, fn, ri*rj/(ri + rj), law.mur, ieff, dt, M);
+      for (int c = 0; c < DW; ++c) t.M[c][q] = M[c];
+      if constexpr (FH) t.lroll[q] = rolling_loss<S, DW>(M, wr, ieff, dt);
+    }
+  }
+}
+
+// within[k] for the pair slots k of (pi, pj) [0, cnt): whether the pair lies within reach, i.e.
+// its centre distance |d| (Loop::slot's d) is at most the bound r_i + r_j + max(gap, cg) beyond
+// which it can neither touch, conduct across the gap (gap = gapf d_min, gapf the conduction gap
+// tolerance, 0 without one) nor count in output 11 (cg = cgap d_min): the exact tests of Loop::tile
+// and Loop::pair (on the overlap, as the JAX kernel decides) cannot pass beyond it (the factor
+// 1.0001 on the squares keeps round-off on the safe side). 0 for a padding slot (i >= n). One loop
+// without branches over the slots, in vector instructions: the partners' data are read for every
+// listed pair here, and about three in four lie out of reach in a turning bed.
+template <typename S, int D, bool PERIODIC>
+DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int32_t* __restrict pj,
+                                         int cnt, const S* __restrict x, const S* __restrict r,
+                                         int32_t n, S L, S gapf, S cgap,
+                                         unsigned char* __restrict within) {
+  for (int k = 0; k < cnt; ++k) {
+    const int32_t i0 = pi[k], j0 = pj[k];
+    const bool real = i0 < n;
+    const int32_t i = real ? i0 : 0, j = real ? j0 : 0;  // padding reads particle 0
+    S d[D];
+    for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
+    if constexpr (PERIODIC)
+      d[2] = d[2] > S(0.5)*L ? d[2] - L : (d[2] < S(-0.5)*L ? d[2] + L : d[2]);
+    const S dist2 = dot<S, D>(d, d);
+    const S ri = r[i], rj = r[j];
+    const S rmin = ri < rj ? ri : rj;
+    const S gap = gapf*(S(2)*rmin), cg = cgap*(S(2)*rmin);
+    const S re = (ri + rj) + (gap > cg ? gap : cg);
+    within[k] = real & !(dist2 > re*re*S(1.0001));
+  }
 }
 
 // Per-chunk accumulators (forces and torques in S, then N doubles of heat) that live across
@@ -372,33 +528,6 @@ void for_chunks(ffi::ThreadPool& pool, int64_t nc, std::function<void(int)> run)
   while (job->active.load() != 0) std::this_thread::yield();
 }
 
-// Friction heat, per contact (see the header): the spring energy before the step,
-// k_n delta_0^2 / 2 (while delta_0 > 0) + k_t |xi_old|^2 / 2, as ContactForces' _pair_work and
-// _spring_energy_and_rates compute it; xi2 = |xi_old|^2
-template <typename S>
-inline S energy_before(const Law<S>& c, S ov0, S xi2) {
-  return (ov0 > S(0) ? S(0.5)*c.kn*(ov0*ov0) : S(0)) + S(0.5)*c.kt*xi2;
-}
-
-// a contact that does not touch now: D = U_old; the tangential spring's energy is booked as
-// sliding (contact_law: the release of a contact that opens)
-template <typename S>
-inline void opened(const Law<S>& c, S ov0, S xi2, S* dU, double* R) {
-  *dU = -energy_before<S>(c, ov0, xi2);
-  R[1] += double(S(0.5)*c.kt*xi2);
-}
-
-// the overlap of a pair before the step, at the positions before the drift x - dt v (the JAX
-// kernel's `prev`), with the nearest periodic image of the last axis
-template <typename S, int D>
-inline S overlap_before(const S* xi, const S* xj, const S* vi, const S* vj, S rs, S dt, S L) {
-  S d0[D];
-  for (int c = 0; c < D; ++c) d0[c] = (xj[c] - dt*vj[c]) - (xi[c] - dt*vi[c]);
-  if constexpr (D == 3)
-    if (L > S(0)) d0[2] = d0[2] > S(0.5)*L ? d0[2] - L : (d0[2] < S(-0.5)*L ? d0[2] + L : d0[2]);
-  return rs - std::sqrt(dot<S, D>(d0, d0));
-}
-
 // the buffers of one call, untyped (their dtype is checked in ContactsImpl)
 struct Call {
   const void *x, *v, *w, *r, *ms, *in, *sp, *wd, *wn, *wv, *ws, *tpp, *tpw, *wom, *wd0;
@@ -481,15 +610,6 @@ struct Loop {
     return g;
   }
 
-  // the bound on |d| beyond which a pair can neither touch, conduct across the gap nor count
-  // in output 11: the exact tests in `pair` (on the overlap, as the JAX kernel decides) cannot
-  // pass beyond it
-  S reach(const Slot& g) const {
-    const S gap = gap_on ? tol*(S(2)*g.rmin) : S(0);
-    const S cg = cgap*(S(2)*g.rmin);
-    return g.rs + (gap > cg ? gap : cg);
-  }
-
   const Law<S>& pair_law(const Slot& g) const {
     return one_type ? pp[0] : pp[pt[g.i]*nt + pt[g.j]];
   }
@@ -511,108 +631,132 @@ struct Loop {
     }
   }
 
-  // The pair slots [k0, k1) in blocks of BLOCK slots, two passes per block. The scan writes
-  // every slot's outputs as for a pair that does not touch (zeros, the spring cleared, with
-  // friction heat the opened contact's row) and collects the slots within reach; `pair` then
-  // computes those. Without friction heat the scan has no branch that depends on the geometry
-  // (a slot's index is written to the list and the count advanced by whether it is within
-  // reach), so the processor does not mispredict on the many listed pairs out of reach, and
-  // the list's slots are still in the cache when `pair` reads them.
+  // The pair slots [k0, k1) in blocks of BLOCK slots, two passes per block. The scan tells
+  // which slots lie within reach (within_reach, in vector instructions), writes every slot's
+  // outputs as for a pair that does not touch (zeros, the spring cleared, with friction heat the
+  // opened contact's row) and collects the slots within reach in a short list (a slot's index
+  // written and the count advanced by the flag: no branch on the geometry, so the processor does
+  // not mispredict on the many listed pairs out of reach); `tile` then computes the list, Tile::N
+  // slots at a time, while its slots are still in the cache.
   static constexpr int64_t BLOCK = 256;
 
   S pairs(int64_t k0, int64_t k1, S* F, S* T, double* Q, double* R) const {
     S max_ov = S(0);
     int64_t near[BLOCK];
+    std::unique_ptr<Tile<S, D>> tl(new Tile<S, D>);  // off the thread's stack
     for (int64_t b0 = k0; b0 < k1; b0 += BLOCK) {
       const int64_t b1 = b0 + BLOCK < k1 ? b0 + BLOCK : k1;
+      const int nb = static_cast<int>(b1 - b0);
+      unsigned char within[BLOCK];
+      if (D == 3 && L > S(0))
+        within_reach<S, D, true>(P + b0, P + m + b0, nb, x, r, static_cast<int32_t>(n), L,
+                                 gap_on ? tol : S(0), cgap, within);
+      else
+        within_reach<S, D, false>(P + b0, P + m + b0, nb, x, r, static_cast<int32_t>(n), L,
+                                  gap_on ? tol : S(0), cgap, within);
+      // zero where nothing touches (written here, while the lines are at hand: a sweep over
+      // the whole output first would pass them through the cache twice where they do not fit)
+      for (int64_t k = b0; k < b1; ++k) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
+      for (int64_t k = b0; k < b1; ++k) CD[k] = false;
+      if (fh) for (int64_t k = KP*b0; k < KP*b1; ++k) PW[k] = S(0);
       int64_t cnt = 0;
-      for (int64_t k = b0; k < b1; ++k) {
-        S* s = Sn + D*k;
-        // zero where nothing touches (written here, while the line is at hand: a sweep over
-        // the whole output first would pass it through the cache twice where it does not fit)
-        if (fh) for (int c = 0; c < KP; ++c) PW[KP*k + c] = S(0);
-        OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
-        if (P[k] >= n) { clear<S, D>(s); continue; }  // padding (in a list not sorted by i)
-        const Slot g = slot(k);
-        const S re = reach(g);
-        const bool within = !(g.dist2 > re*re*S(1.0001));
+      for (int q = 0; q < nb; ++q) {
+        const int64_t k = b0 + q;
         near[cnt] = k;
-        cnt += within;
-        if (fh && !within)
+        cnt += within[q];
+        if (fh && !within[q] && P[k] < n) {  // read the old spring before it is cleared
+          const Slot g = slot(k);
           opened<S>(pair_law(g), overlap0(g), spring2(k), PW + KP*k + KP - 1, R);
-        clear_unless<S, D>(s, within);
+        }
+        clear_unless<S, D>(Sn + D*k, within[q]);  // a padding slot is never within reach
       }
-      for (int64_t q = 0; q < cnt; ++q) {
-        const S ratio_ov = pair(near[q], F, T, Q, R);
+      for (int64_t q = 0; q < cnt; q += Tile<S, D>::N) {
+        const int c = static_cast<int>(cnt - q < Tile<S, D>::N ? cnt - q : Tile<S, D>::N);
+        const S ratio_ov = tile(*tl, near + q, c, F, T, Q, R);
         if (ratio_ov > max_ov) max_ov = ratio_ov;
       }
     }
     return max_ov;
   }
 
-  // pair slot k within reach (the scan has written its outputs as for an open contact):
-  // returns overlap / smaller radius (0 where it does not touch)
-  S pair(int64_t k, S* F, S* T, double* Q, double* R) const {
-    const Slot g = slot(k);
-    const int32_t i = g.i, j = g.j;
-    const S* d = g.d;
-    const S dist2 = g.dist2, ri = g.ri, rj = g.rj, rs = g.rs, rmin = g.rmin;
-    S* s = Sn + D*k;
-    const S* so = sp + D*k;
-    S* hw = fh ? PW + KP*k : nullptr;  // friction heat row (header)
-    const Law<S>& law = pair_law(g);
-    const S xi2 = spring2(k);
-    const S ov0 = overlap0(g);
-    // conduction across a gap of at most tol min(d_i, d_j)
-    const S gap = gap_on ? tol*(S(2)*rmin) : S(0);
-    const S cg = cgap*(S(2)*rmin);  // the gap of output 11
-    const S dist = std::sqrt(dist2);
-    const S ov = rs - dist;
-    CD[k] = cgap > S(0) ? ov >= -cg : ov > S(0);  // without a gap: while they overlap
-    if (!(ov > S(0))) {
-      if (fh) opened<S>(law, ov0, xi2, hw + KP - 1, R);
-      clear<S, D>(s);
-      if (gap_on && ov >= -gap) {
-        const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
-        Q[i] += q; Q[j] -= q;
+  // The slots near[0 .. cnt) within reach (cnt <= Tile::N; the scan has written their outputs
+  // as for an open contact): their data gathered into the tile, the law in vector instructions
+  // (pair_law_tile), the results put out slot by slot in the list's order (every sum takes its
+  // terms in that order, whichever instruction set ran the law). Returns the largest
+  // overlap / smaller radius (0 where nothing touches).
+  S tile(Tile<S, D>& t, const int64_t* near, int cnt, S* F, S* T, double* Q, double* R) const {
+    for (int q = 0; q < cnt; ++q) {
+      const int64_t k = near[q];
+      const Slot g = slot(k);
+      const Law<S>& law = pair_law(g);
+      for (int c = 0; c < D; ++c) {
+        t.d[c][q] = g.d[c]; t.vi[c][q] = v[D*g.i + c]; t.vj[c][q] = v[D*g.j + c];
+        t.so[c][q] = sp[D*k + c];
       }
-      return S(0);
+      for (int c = 0; c < DW; ++c) { t.wi[c][q] = w[DW*g.i + c]; t.wj[c][q] = w[DW*g.j + c]; }
+      t.dist2[q] = g.dist2; t.ri[q] = g.ri; t.rj[q] = g.rj;
+      t.mi[q] = ms[g.i]; t.mj[q] = ms[g.j];
+      if (roll_pp) { t.ii[q] = in[g.i]; t.ij[q] = in[g.j]; }
+      t.kn[q] = law.kn; t.kt[q] = law.kt; t.gn[q] = law.gn; t.gt[q] = law.gt;
+      t.mu[q] = law.mu; t.mur[q] = law.mur;
+      if (fh) { t.ov0[q] = overlap0(g); t.xi2[q] = spring2(k); }  // before the spring is written
     }
-    const S inv = dist > S(0) ? S(1) / dist : S(0);
-    S nr[D], ai[D], aj[D], ci[D], cj[D], vr[D], f[D], M[DW] = {};
-    const S li = ri - S(0.5)*ov, lj = -(rj - S(0.5)*ov);
-    for (int c = 0; c < D; ++c) { nr[c] = d[c]*inv; ai[c] = li*nr[c]; aj[c] = lj*nr[c]; }
-    spin_cross<S, D>(w + DW*i, ai, ci);
-    spin_cross<S, D>(w + DW*j, aj, cj);
-    for (int c = 0; c < D; ++c) vr[c] = (v[D*j + c] + cj[c]) - (v[D*i + c] + ci[c]);
-    const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[i]*ms[j]/(ms[i] + ms[j]), so, s, f,
-                               fh ? R : nullptr);
-    FN[k] = fn;
-    for (int c = 0; c < D; ++c) { F[D*j + c] += f[c]; F[D*i + c] -= f[c]; }
-    if (rot) {
-      add_torque<S, D>(T + DW*i, ai, f, S(-1));  // a_i x (-f)
-      add_torque<S, D>(T + DW*j, aj, f, S(1));   // a_j x f
-      if (roll_pp) {
-        S wr[DW];
-        for (int c = 0; c < DW; ++c) wr[c] = w[DW*j + c] - w[DW*i + c];
-        const S ii = in[i], ij = in[j], ieff = ii*ij/(ii + ij);
-        rolling<S, DW>(wr, fn, ri*rj/(ri + rj), law.mur, ieff, dt, M);
-        for (int c = 0; c < DW; ++c) { T[DW*j + c] += M[c]; T[DW*i + c] -= M[c]; }
-        if (fh) R[2] += rolling_loss<S, DW>(M, wr, ieff, dt);
+    if (fh) law_tile<true>(t, cnt);
+    else law_tile<false>(t, cnt);
+    S max_ov = S(0);
+    for (int q = 0; q < cnt; ++q) {
+      const int64_t k = near[q];
+      const int32_t i = P[k], j = P[m + k];
+      const S ri = t.ri[q], rj = t.rj[q], rmin = ri < rj ? ri : rj;
+      const S ov = t.ov[q], dist = t.dist[q];
+      S* s = Sn + D*k;
+      S* hw = fh ? PW + KP*k : nullptr;  // friction heat row (header)
+      CD[k] = cgap > S(0) ? ov >= -(cgap*(S(2)*rmin)) : ov > S(0);  // without a gap: overlap
+      if (!(ov > S(0))) {
+        if (fh) opened<S>(Law<S>{t.kn[q], t.kt[q]}, t.ov0[q], t.xi2[q], hw + KP - 1, R);
+        clear<S, D>(s);
+        if (gap_on && ov >= -(tol*(S(2)*rmin))) {
+          const double qh = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
+          Q[i] += qh; Q[j] -= qh;
+        }
+        continue;
       }
+      FN[k] = t.fn[q];
+      if (fh) { R[0] += double(t.loss[0][q]); R[1] += double(t.loss[1][q]); }
+      for (int c = 0; c < D; ++c) { F[D*j + c] += t.f[c][q]; F[D*i + c] -= t.f[c][q]; }
+      if (rot) {
+        for (int c = 0; c < DW; ++c) T[DW*i + c] += t.ti[c][q];
+        for (int c = 0; c < DW; ++c) T[DW*j + c] += t.tj[c][q];
+        if (roll_pp) {
+          for (int c = 0; c < DW; ++c) { T[DW*j + c] += t.M[c][q]; T[DW*i + c] -= t.M[c][q]; }
+          if (fh) R[2] += double(t.lroll[q]);
+        }
+      }
+      for (int c = 0; c < D; ++c) s[c] = t.s[c][q];
+      if (fh) {
+        for (int c = 0; c < D; ++c) {
+          hw[c] = t.f[c][q]; hw[D + c] = t.ai[c][q]; hw[2*D + c] = t.aj[c][q];
+        }
+        for (int c = 0; c < DW; ++c) hw[3*D + c] = roll_pp ? t.M[c][q] : S(0);
+        hw[KP - 1] = t.du[q];
+      }
+      OV[k] = ov; DI[k] = dist;
+      if (heat_on) {
+        const double qh = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
+        Q[i] += qh; Q[j] -= qh;
+      }
+      const S r_ov = ov / rmin;
+      if (r_ov > max_ov) max_ov = r_ov;
     }
-    if (fh) {
-      for (int c = 0; c < D; ++c) { hw[c] = f[c]; hw[D + c] = ai[c]; hw[2*D + c] = aj[c]; }
-      for (int c = 0; c < DW; ++c) hw[3*D + c] = M[c];
-      hw[KP - 1] = (S(0.5)*law.kn*(ov*ov) + S(0.5)*law.kt*dot<S, D>(s, s))
-                   - energy_before<S>(law, ov0, xi2);
-    }
-    OV[k] = ov; DI[k] = dist;
-    if (heat_on) {
-      const double q = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
-      Q[i] += q; Q[j] -= q;
-    }
-    return ov / rmin;
+    return max_ov;
+  }
+
+  // pair_law_tile for this call's torques and rolling resistance
+  template <bool FH>
+  void law_tile(Tile<S, D>& t, int cnt) const {
+    if (roll_pp) pair_law_tile<S, D, true, true, FH>(t, cnt, dt);
+    else if (rot) pair_law_tile<S, D, true, false, FH>(t, cnt, dt);
+    else pair_law_tile<S, D, false, false, FH>(t, cnt, dt);
   }
 
   // walls: partner A is the wall (spin omega_wall about z, infinite mass), B the particle
@@ -641,7 +785,9 @@ struct Loop {
     for (int c = 0; c < D; ++c) al[c] = l*nr[c];
     spin_cross<S, D>(w + DW*p, al, cw);
     for (int c = 0; c < D; ++c) vr[c] = v[D*p + c] + cw[c] - WV[D*q + c];
-    const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[p], so, s, f, fh ? R : nullptr);
+    S loss[2];
+    const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[p], so, s, f, fh ? loss : nullptr);
+    if (fh) { R[0] += double(loss[0]); R[1] += double(loss[1]); }
     WF[q] = fn;
     for (int c = 0; c < D; ++c) F[D*p + c] += f[c];
     if (rot) {
@@ -652,7 +798,7 @@ struct Loop {
         wr[DW - 1] -= WOM[wl];  // the wall spins about z
         rolling<S, DW>(wr, fn, rp, law.mur, in[p], dt, M);
         for (int c = 0; c < DW; ++c) T[DW*p + c] += M[c];
-        if (fh) R[2] += rolling_loss<S, DW>(M, wr, in[p], dt);
+        if (fh) R[2] += double(rolling_loss<S, DW>(M, wr, in[p], dt));
       }
     }
     if (fh) {

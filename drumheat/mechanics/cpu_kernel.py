@@ -41,7 +41,7 @@ without raising). The JAX kernel stays the reference and the path for GPUs, ense
 everything else; ``tests/test_cpu_kernel.py`` holds the two equal to round-off.
 
 Build: :func:`available` compiles the source with ``$CXX`` (else the first of ``g++``, ``c++``,
-``clang++`` on the PATH) and ``-O3 -fno-math-errno`` on first use into
+``clang++`` on the PATH) and :data:`FLAGS` on first use into
 ``$DRUMHEAT_CACHE_DIR/kernels`` (default ``~/.cache/drumheat/kernels``), named by the hash of the
 source, the flags and the jaxlib version, under a file lock (parallel processes build it once),
 loads and registers it; a kernel already in the cache needs no compiler. Its answer
@@ -77,7 +77,14 @@ NEIGHBOR_TARGET = "drumheat_neighbors"
 SOURCE = Path(__file__).with_name("contact_kernel.cc")
 #: the sources compiled into the one library: the contact loop and the neighbour rebuild
 SOURCES = (SOURCE, Path(__file__).with_name("neighbor_kernel.cc"))
-FLAGS = ("-O3", "-fno-math-errno", "-shared", "-fPIC", "-std=c++17", "-w")
+#: compiler flags. None changes a number: -ffp-contract=off keeps a * b + c two roundings in the
+#: AVX2 / AVX-512 versions of the vector loops (contact_kernel.cc), which have fused
+#: multiply-adds, so that every version gives the numbers of the baseline x86-64 build;
+#: -fno-trapping-math and -fno-math-errno let the compiler compute both sides of a selection and
+#: use the square-root instruction (nothing reads floating-point flags or errno), which those
+#: loops need.
+FLAGS = ("-O3", "-ffp-contract=off", "-fno-trapping-math", "-fno-math-errno", "-shared", "-fPIC",
+         "-std=c++17", "-w")
 COMPILERS = ("g++", "c++", "clang++")
 COMPILE_TIMEOUT_S = 600
 _STATE: tuple[bool, str] | None = None  # the answer of available(), once known
