@@ -298,8 +298,10 @@ def main():
             shutil.copy(f, work / f.name)
     thermal = args.thermal == "on"
     globals()["PREP_TIMEOUT"] = args.prep_timeout
-    print(f"jax {jax.__version__} on {jax.devices()[0].platform}; drumheat float32 mechanics, "
-          f"float64 temperatures; heat conduction {args.thermal}; {os.cpu_count()} CPUs")
+    mech = ("float32 mechanics, float64 temperatures (bespoke DEM)" if args.bespoke else
+            "the scene's float64 mechanics and temperatures")
+    print(f"jax {jax.__version__} on {jax.devices()[0].platform}; drumheat {mech}; heat "
+          f"conduction {args.thermal}; {os.cpu_count()} CPUs")
     rows = []
     for n in sizes:
         steps, warm = DEFAULT_STEPS.get(n, (max(1000, 2 * 10**7 // n), 500))
