@@ -328,8 +328,7 @@ inline S overlap_before(const S* xi, const S* xj, const S* vi, const S* vj, S rs
 // The contact law of up to Tile::N pair slots within reach, one array per quantity (structure
 // of arrays): Loop::tile gathers the slots' data into it, pair_law_tile computes the law of all
 // of them in one loop without branches, which the compiler runs in vector instructions (several
-// contacts per instruction), and Loop::tile puts the results where Loop::pair would have put
-// them. 49 arrays of 64 (3D, float64; 61 with friction heat): 25 kB (31 kB), about the size of
+// contacts per instruction), and Loop::tile puts the results out slot by slot. 49 arrays of 64 (3D, float64; 61 with friction heat): 25 kB (31 kB), about the size of
 // a core's first-level cache.
 template <typename S, int D>
 struct Tile {
@@ -412,7 +411,7 @@ DRUMHEAT_VECTOR_CLONES void pair_law_tile(Tile<S, D>& t, int cnt, S dt) {
 // its centre distance |d| (Loop::slot's d) is at most the bound r_i + r_j + max(gap, cg) beyond
 // which it can neither touch, conduct across the gap (gap = gapf d_min, gapf the conduction gap
 // tolerance, 0 without one) nor count in output 11 (cg = cgap d_min): the exact tests of Loop::tile
-// and Loop::pair (on the overlap, as the JAX kernel decides) cannot pass beyond it (the factor
+// (on the overlap, as the JAX kernel decides) cannot pass beyond it (the factor
 // 1.0001 on the squares keeps round-off on the safe side). 0 for a padding slot (i >= n). One loop
 // without branches over the slots, in vector instructions: the partners' data are read for every
 // listed pair here, and about three in four lie out of reach in a turning bed.
