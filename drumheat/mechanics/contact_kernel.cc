@@ -407,8 +407,17 @@ DRUMHEAT_VECTOR_CLONES void pair_law_tile(Tile<S, D>& t, int cnt, S dt) {
   }
 }
 
-// within[k] for the pair slots k of (pi, pj) [0, cnt): whether the pair lies within reach, i.e.
-// its centre distance |d| (Loop::slot's d) is at most the bound r_i + r_j + max(gap, cg) beyond
+// What the scan finds for a block of pair slots (Loop::pairs): for each, d from i to j (the
+// nearest periodic image of the last axis), |d|^2 and whether the pair lies within reach.
+template <typename S, int D>
+struct Block {
+  static constexpr int N = 256;
+  alignas(64) S d[D][N], dist2[N];
+  alignas(64) unsigned char within[N];
+};
+
+// The Block of the pair slots k of (pi, pj) [0, cnt): d and |d|^2 as Loop::slot computes them,
+// and whether the pair lies within reach, i.e. its centre distance |d| is at most the bound r_i + r_j + max(gap, cg) beyond
 // which it can neither touch, conduct across the gap (gap = gapf d_min, gapf the conduction gap
 // tolerance, 0 without one) nor count in output 11 (cg = cgap d_min): the exact tests of Loop::tile
 // (on the overlap, as the JAX kernel decides) cannot pass beyond it (the factor
@@ -418,8 +427,7 @@ DRUMHEAT_VECTOR_CLONES void pair_law_tile(Tile<S, D>& t, int cnt, S dt) {
 template <typename S, int D, bool PERIODIC>
 DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int32_t* __restrict pj,
                                          int cnt, const S* __restrict x, const S* __restrict r,
-                                         int32_t n, S L, S gapf, S cgap,
-                                         unsigned char* __restrict within) {
+                                         int32_t n, S L, S gapf, S cgap, Block<S, D>& b) {
   for (int k = 0; k < cnt; ++k) {
     const int32_t i0 = pi[k], j0 = pj[k];
     const bool real = i0 < n;
@@ -433,7 +441,9 @@ DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int
     const S rmin = ri < rj ? ri : rj;
     const S gap = gapf*(S(2)*rmin), cg = cgap*(S(2)*rmin);
     const S re = (ri + rj) + (gap > cg ? gap : cg);
-    within[k] = real & !(dist2 > re*re*S(1.0001));
+    for (int c = 0; c < D; ++c) b.d[c][k] = d[c];
+    b.dist2[k] = dist2;
+    b.within[k] = real & !(dist2 > re*re*S(1.0001));
   }
 }
 
@@ -645,22 +655,23 @@ struct Loop {
   // written and the count advanced by the flag: no branch on the geometry, so the processor does
   // not mispredict on the many listed pairs out of reach); `tile` then computes the list, Tile::N
   // slots at a time, while its slots are still in the cache.
-  static constexpr int64_t BLOCK = 256;
+  static constexpr int64_t BLOCK = Block<S, D>::N;
 
   S pairs(int64_t k0, int64_t k1, S* F, S* T, double* Q, double* R) const {
     S max_ov = S(0);
     int64_t near[BLOCK];
     std::unique_ptr<Tile<S, D>> tl(new Tile<S, D>);  // off the thread's stack
+    std::unique_ptr<Block<S, D>> bl(new Block<S, D>);
+    const unsigned char* within = bl->within;
     for (int64_t b0 = k0; b0 < k1; b0 += BLOCK) {
       const int64_t b1 = b0 + BLOCK < k1 ? b0 + BLOCK : k1;
       const int nb = static_cast<int>(b1 - b0);
-      unsigned char within[BLOCK];
       if (D == 3 && L > S(0))
         within_reach<S, D, true>(P + b0, P + m + b0, nb, x, r, static_cast<int32_t>(n), L,
-                                 gap_on ? tol : S(0), cgap, within);
+                                 gap_on ? tol : S(0), cgap, *bl);
       else
         within_reach<S, D, false>(P + b0, P + m + b0, nb, x, r, static_cast<int32_t>(n), L,
-                                  gap_on ? tol : S(0), cgap, within);
+                                  gap_on ? tol : S(0), cgap, *bl);
       // zero where nothing touches (written here, while the lines are at hand: a sweep over
       // the whole output first would pass them through the cache twice where they do not fit)
       for (int64_t k = b0; k < b1; ++k) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
@@ -679,7 +690,7 @@ struct Loop {
       }
       for (int64_t q = 0; q < cnt; q += Tile<S, D>::N) {
         const int c = static_cast<int>(cnt - q < Tile<S, D>::N ? cnt - q : Tile<S, D>::N);
-        const S ratio_ov = tile(*tl, near + q, c, F, T, Q, R);
+        const S ratio_ov = tile(*tl, *bl, b0, near + q, c, F, T, Q, R);
         if (ratio_ov > max_ov) max_ov = ratio_ov;
       }
     }
@@ -691,22 +702,27 @@ struct Loop {
   // (pair_law_tile), the results put out slot by slot in the list's order (every sum takes its
   // terms in that order, whichever instruction set ran the law). Returns the largest
   // overlap / smaller radius (0 where nothing touches).
-  S tile(Tile<S, D>& t, const int64_t* near, int cnt, S* F, S* T, double* Q, double* R) const {
+  // bl: the scan's Block of the slots from b0 on.
+  S tile(Tile<S, D>& t, const Block<S, D>& bl, int64_t b0, const int64_t* near, int cnt, S* F,
+         S* T, double* Q, double* R) const {
     for (int q = 0; q < cnt; ++q) {
-      const int64_t k = near[q];
-      const Slot g = slot(k);
-      const Law<S>& law = pair_law(g);
+      const int64_t k = near[q], b = k - b0;
+      const int32_t i = P[k], j = P[m + k];
+      const Law<S>& law = one_type ? pp[0] : pp[pt[i]*nt + pt[j]];
       for (int c = 0; c < D; ++c) {
-        t.d[c][q] = g.d[c]; t.vi[c][q] = v[D*g.i + c]; t.vj[c][q] = v[D*g.j + c];
+        t.d[c][q] = bl.d[c][b]; t.vi[c][q] = v[D*i + c]; t.vj[c][q] = v[D*j + c];
         t.so[c][q] = sp[D*k + c];
       }
-      for (int c = 0; c < DW; ++c) { t.wi[c][q] = w[DW*g.i + c]; t.wj[c][q] = w[DW*g.j + c]; }
-      t.dist2[q] = g.dist2; t.ri[q] = g.ri; t.rj[q] = g.rj;
-      t.mi[q] = ms[g.i]; t.mj[q] = ms[g.j];
-      if (roll_pp) { t.ii[q] = in[g.i]; t.ij[q] = in[g.j]; }
+      for (int c = 0; c < DW; ++c) { t.wi[c][q] = w[DW*i + c]; t.wj[c][q] = w[DW*j + c]; }
+      t.dist2[q] = bl.dist2[b]; t.ri[q] = r[i]; t.rj[q] = r[j];
+      t.mi[q] = ms[i]; t.mj[q] = ms[j];
+      if (roll_pp) { t.ii[q] = in[i]; t.ij[q] = in[j]; }
       t.kn[q] = law.kn; t.kt[q] = law.kt; t.gn[q] = law.gn; t.gt[q] = law.gt;
       t.mu[q] = law.mu; t.mur[q] = law.mur;
-      if (fh) { t.ov0[q] = overlap0(g); t.xi2[q] = spring2(k); }  // before the spring is written
+      if (fh) {  // before the spring is written
+        t.ov0[q] = overlap0(slot(k));
+        t.xi2[q] = spring2(k);
+      }
     }
     if (fh) law_tile<true>(t, cnt);
     else law_tile<false>(t, cnt);
