@@ -350,8 +350,10 @@ struct Tile {
 // x86-64: the loop of pair_law_tile compiled for AVX-512, AVX2 and the baseline (SSE2), the one
 // the processor runs chosen when the library is loaded. The results do not depend on which:
 // the same operations on every lane, no contraction into fused multiply-adds (-ffp-contract=off
-// in cpu_kernel.FLAGS), sqrt and division exactly rounded in every instruction set.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+// in cpu_kernel.FLAGS), sqrt and division exactly rounded in every instruction set. GCC with
+// glibc only: the choice at load time needs the loader's indirect functions (ifunc), which other
+// C libraries (musl) lack; elsewhere the baseline version alone.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__)
 #define DRUMHEAT_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
 #define DRUMHEAT_VECTOR_CLONES
