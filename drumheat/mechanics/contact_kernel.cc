@@ -314,6 +314,13 @@ inline void opened(const Law<S>& c, S ov0, S xi2, S* dU, double* R) {
   R[1] += double(S(0.5)*c.kt*xi2);
 }
 
+// the nearest periodic image of a difference d of last coordinates (period L; positions are
+// kept in [0, L), so |d| < L): the same as d - L rint(d / L), without a libm call per pair
+template <typename S>
+inline S nearest_image(S d, S L) {
+  return d > S(0.5)*L ? d - L : (d < S(-0.5)*L ? d + L : d);
+}
+
 // the overlap of a pair before the step, at the positions before the drift x - dt v (the JAX
 // kernel's `prev`), with the nearest periodic image of the last axis
 template <typename S, int D>
@@ -321,7 +328,7 @@ inline S overlap_before(const S* xi, const S* xj, const S* vi, const S* vj, S rs
   S d0[D];
   for (int c = 0; c < D; ++c) d0[c] = (xj[c] - dt*vj[c]) - (xi[c] - dt*vi[c]);
   if constexpr (D == 3)
-    if (L > S(0)) d0[2] = d0[2] > S(0.5)*L ? d0[2] - L : (d0[2] < S(-0.5)*L ? d0[2] + L : d0[2]);
+    if (L > S(0)) d0[2] = nearest_image(d0[2], L);
   return rs - std::sqrt(dot<S, D>(d0, d0));
 }
 
@@ -418,8 +425,8 @@ struct Block {
   alignas(64) unsigned char within[N];
 };
 
-// The Block of the pair slots k of (pi, pj) [0, cnt): d and |d|^2 as Loop::slot computes them,
-// and whether the pair lies within reach, i.e. its centre distance |d| is at most the bound r_i + r_j + max(gap, cg) beyond
+// The Block of the pair slots k of (pi, pj) [0, cnt): d from i to j (the nearest periodic image
+// of the last axis with PERIODIC) and |d|^2, and whether the pair lies within reach, i.e. its centre distance |d| is at most the bound r_i + r_j + max(gap, cg) beyond
 // which it can neither touch, conduct across the gap (gap = gapf d_min, gapf the conduction gap
 // tolerance, 0 without one) nor count in output 11 (cg = cgap d_min): the exact tests of Loop::tile
 // (on the overlap, as the JAX kernel decides) cannot pass beyond it (the factor
@@ -436,8 +443,7 @@ DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int
     const int32_t i = real ? i0 : 0, j = real ? j0 : 0;  // padding reads particle 0
     S d[D];
     for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
-    if constexpr (PERIODIC)
-      d[2] = d[2] > S(0.5)*L ? d[2] - L : (d[2] < S(-0.5)*L ? d[2] + L : d[2]);
+    if constexpr (PERIODIC) d[2] = nearest_image(d[2], L);
     const S dist2 = dot<S, D>(d, d);
     const S ri = r[i], rj = r[j];
     const S rmin = ri < rj ? ri : rj;
@@ -606,38 +612,16 @@ struct Loop {
     roll_pw = roll_pw && rot;
   }
 
-  // The geometry of pair slot k (a listed pair, i < n): the partners, the vector d from i to
-  // j (the nearest periodic image of the last axis), |d|^2 and the radii
-  struct Slot {
-    int32_t i, j;
-    S d[D], dist2, ri, rj, rs, rmin;
-  };
-
-  Slot slot(int64_t k) const {
-    Slot g;
-    g.i = P[k]; g.j = P[m + k];
-    for (int c = 0; c < D; ++c) g.d[c] = x[D*g.j + c] - x[D*g.i + c];
-    // nearest periodic image of the last axis (positions are kept in [0, L), so |d| < L);
-    // the same as d - L rint(d / L), without a libm call per slot
-    if constexpr (D == 3)
-      if (L > S(0))
-        g.d[2] = g.d[2] > S(0.5)*L ? g.d[2] - L : (g.d[2] < S(-0.5)*L ? g.d[2] + L : g.d[2]);
-    g.dist2 = dot<S, D>(g.d, g.d);
-    g.ri = r[g.i]; g.rj = r[g.j];
-    g.rs = g.ri + g.rj;
-    g.rmin = g.ri < g.rj ? g.ri : g.rj;
-    return g;
-  }
-
-  const Law<S>& pair_law(const Slot& g) const {
-    return one_type ? pp[0] : pp[pt[g.i]*nt + pt[g.j]];
+  // the law of the listed pair (i, j)
+  const Law<S>& pair_law(int32_t i, int32_t j) const {
+    return one_type ? pp[0] : pp[pt[i]*nt + pt[j]];
   }
 
   // friction heat: the springs' energy before the step, |xi_old|^2 and the overlap before the
   // step's drift (read before the spring is written)
   S spring2(int64_t k) const { return fh ? dot<S, D>(sp + D*k, sp + D*k) : S(0); }
-  S overlap0(const Slot& g) const {
-    return fh ? overlap_before<S, D>(x + D*g.i, x + D*g.j, v + D*g.i, v + D*g.j, g.rs, dt, L)
+  S overlap0(int32_t i, int32_t j) const {
+    return fh ? overlap_before<S, D>(x + D*i, x + D*j, v + D*i, v + D*j, r[i] + r[j], dt, L)
               : S(0);
   }
 
@@ -685,8 +669,8 @@ struct Loop {
         near[cnt] = k;
         cnt += within[q];
         if (fh && !within[q] && P[k] < n) {  // read the old spring before it is cleared
-          const Slot g = slot(k);
-          opened<S>(pair_law(g), overlap0(g), spring2(k), PW + KP*k + KP - 1, R);
+          const int32_t i = P[k], j = P[m + k];
+          opened<S>(pair_law(i, j), overlap0(i, j), spring2(k), PW + KP*k + KP - 1, R);
         }
         clear_unless<S, D>(Sn + D*k, within[q]);  // a padding slot is never within reach
       }
@@ -710,7 +694,7 @@ struct Loop {
     for (int q = 0; q < cnt; ++q) {
       const int64_t k = near[q], b = k - b0;
       const int32_t i = P[k], j = P[m + k];
-      const Law<S>& law = one_type ? pp[0] : pp[pt[i]*nt + pt[j]];
+      const Law<S>& law = pair_law(i, j);
       for (int c = 0; c < D; ++c) {
         t.d[c][q] = bl.d[c][b]; t.vi[c][q] = v[D*i + c]; t.vj[c][q] = v[D*j + c];
         t.so[c][q] = sp[D*k + c];
@@ -722,7 +706,7 @@ struct Loop {
       t.kn[q] = law.kn; t.kt[q] = law.kt; t.gn[q] = law.gn; t.gt[q] = law.gt;
       t.mu[q] = law.mu; t.mur[q] = law.mur;
       if (fh) {  // before the spring is written
-        t.ov0[q] = overlap0(slot(k));
+        t.ov0[q] = overlap0(i, j);
         t.xi2[q] = spring2(k);
       }
     }
