@@ -30,7 +30,7 @@ import numpy as np
 
 from bench_vs_liggghts import D_P, scene_for, scene_packing
 from machine import cpu_ticks, steal_percent
-from profile_scene_step import loops
+from profile_scene_step import loops, timed
 
 
 def morton_order(pos, cell=D_P):
@@ -72,14 +72,8 @@ def orders(n, names, cache):
         motion = motion_for(n, path)
         dem = motion.dem
         state = dem.run(motion.initial_state(), 300, chunk=300)
-        contact = loops(dem)["contact"]
-        k = jnp.asarray(200, jnp.int32)
-        jax.block_until_ready(contact(state, k))
-        c0, best = cpu_ticks(), float("inf")
-        for _ in range(7):
-            t0 = time.perf_counter()
-            jax.block_until_ready(contact(state, k))
-            best = min(best, time.perf_counter() - t0)
+        c0 = cpu_ticks()
+        best = timed(loops(dem)["contact"], state, jnp.asarray(200, jnp.int32), repeat=7)[0]
         t0 = time.perf_counter()
         jax.block_until_ready(dem.run(state, 1000, chunk=1000).position)
         rate = n * 1000 / (time.perf_counter() - t0)
