@@ -211,6 +211,41 @@ def test_replay_after_continues_the_coupled_run_cyclically():
     assert np.isnan(res.timeseries["interfraction_contacts"].iloc[-1])
 
 
+def test_recording_from_an_interval_on_is_what_the_replay_keeps_of_it():
+    """ContactRecorder.arrays(first) (what the switch to the replay takes) equals the whole
+    recording cut the way Recording(rec, first) cuts it, for a recorder filled interval by
+    interval and for one restored from a checkpoint (one array per quantity)."""
+    from drumheat.motion.dem import ContactRecorder
+    from drumheat.motion.replay import Recording
+
+    rng = np.random.default_rng(0)
+    n, k = 6, 5
+    rec = ContactRecorder(n, 1, 0.01, wall_heated=np.ones(1, bool), wall_ids=np.zeros(1, int),
+                          diameter=np.full(n, 0.01), group=np.zeros(n, int), scene_toml="")
+    rec.add_positions(rng.normal(size=(n, 3)))
+    for _ in range(k):
+        m, w = rng.integers(0, 6), rng.integers(0, 3)
+        rec.pair_i.append(rng.integers(0, n, m).astype(np.int32))
+        rec.pair_j.append(rng.integers(0, n, m).astype(np.int32))
+        rec.pair_dur.append(rng.uniform(0, 0.01, m))
+        rec.pair_ptr.append(rec.pair_ptr[-1] + m)
+        rec.wall_p.append(rng.integers(0, n, w).astype(np.int32))
+        rec.wall_k.append(np.zeros(w, np.int32))
+        rec.wall_dur.append(rng.uniform(0, 0.01, w))
+        rec.wall_ptr.append(rec.wall_ptr[-1] + w)
+        rec.add_positions(rng.normal(size=(n, 3)))
+    restored = ContactRecorder.from_arrays(rec.arrays())
+    for first in range(k):
+        whole = Recording(rec.arrays(), first=first)
+        for r in (rec, restored):
+            cut = Recording(r.arrays(first=first))
+            for a, b in zip(jax.tree_util.tree_leaves((whole.pairs, whole.walls)),
+                            jax.tree_util.tree_leaves((cut.pairs, cut.walls))):
+                np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(whole.positions, cut.positions)
+            np.testing.assert_array_equal(whole.match, cut.match)
+
+
 def test_builtin_dem_scenes_load_and_build():
     for name in ("weigler-mixed", "weigler-glass-drum-9.55", "weigler-glass-drum-47.75",
                  "weigler-glass-mixing-9.55", "weigler-glass-mixing-47.75"):

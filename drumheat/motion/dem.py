@@ -94,7 +94,13 @@ class ContactRecorder:
         self.wall_k.append(nz % self.n_walls)
         self.wall_dur.append(wt[nz])
         self.wall_ptr.append(self.wall_ptr[-1] + len(nz))
-        self.positions.append(position)
+        self.add_positions(position)
+
+    def add_positions(self, position):
+        """Keep the positions at the end of an interval (or the recording's start) in float32,
+        as ``contacts.npz`` stores them: the recording grows by 12 bytes per particle and
+        interval for them instead of 24."""
+        self.positions.append(np.asarray(position, np.float32))
 
     @classmethod
     def from_arrays(cls, a: dict) -> "ContactRecorder":
@@ -107,21 +113,34 @@ class ContactRecorder:
         rec.wall_p, rec.wall_k, rec.wall_dur = ([a["wall_particle"]], [a["wall_index"]],
                                                 [a["wall_duration"]])
         rec.wall_ptr = [int(x) for x in a["wall_ptr"]]
-        rec.positions = list(a["positions_full"])
+        # checkpoints of earlier versions kept them in float64 as "positions_full"
+        rec.positions = [np.asarray(p, np.float32) for p in a.get("positions_full",
+                                                                   a["positions"])]
         return rec
 
-    def arrays(self) -> dict:
-        """The recording as arrays (the content of ``contacts.npz``)."""
-        cat = lambda xs, dt: np.concatenate(xs).astype(dt) if xs else np.zeros(0, dt)  # noqa
+    def arrays(self, first: int = 0) -> dict:
+        """The recording as arrays (the content of ``contacts.npz``); with ``first``, only
+        intervals ``first`` to the last, as :class:`~drumheat.motion.replay.Recording` keeps
+        them (pointers and positions from that interval on), without the whole recording's
+        copy."""
+        def cat(xs, start, dt):  # the concatenation of xs from element `start` on
+            parts, seen = [], 0
+            for x in xs:
+                if seen + len(x) > start:
+                    parts.append(x[max(start - seen, 0):])
+                seen += len(x)
+            return np.concatenate(parts).astype(dt, copy=False) if parts else np.zeros(0, dt)
+
+        pp, wp = (np.asarray(ptr[first:], np.int64) for ptr in (self.pair_ptr, self.wall_ptr))
         return dict(
             interval=self.interval, n_particles=self.n, n_walls=self.n_walls,
-            pair_i=cat(self.pair_i, np.int32), pair_j=cat(self.pair_j, np.int32),
-            pair_duration=cat(self.pair_dur, np.float64),
-            pair_ptr=np.asarray(self.pair_ptr, np.int64),
-            wall_particle=cat(self.wall_p, np.int32), wall_index=cat(self.wall_k, np.int32),
-            wall_duration=cat(self.wall_dur, np.float64),
-            wall_ptr=np.asarray(self.wall_ptr, np.int64),
-            positions=np.stack(self.positions).astype(np.float32), **self.static)
+            pair_i=cat(self.pair_i, pp[0], np.int32), pair_j=cat(self.pair_j, pp[0], np.int32),
+            pair_duration=cat(self.pair_dur, pp[0], np.float64), pair_ptr=pp - pp[0],
+            wall_particle=cat(self.wall_p, wp[0], np.int32),
+            wall_index=cat(self.wall_k, wp[0], np.int32),
+            wall_duration=cat(self.wall_dur, wp[0], np.float64), wall_ptr=wp - wp[0],
+            positions=np.stack(self.positions[first:]).astype(np.float32, copy=False),
+            **self.static)
 
     def save(self, path):
         """Write ``contacts.npz``."""
@@ -276,7 +295,7 @@ class DEMBed(DEMMotion):
                                   wall_heated=self.wall_heated, wall_ids=self.wall_ids,
                                   diameter=self.diameter, group=self.group,
                                   scene_toml=self.scene.to_toml())
-            rec.positions.append(np.asarray(state.position))
+            rec.add_positions(state.position)
         return {"recorder": rec, "recording": None, "g0": 0}
 
     def between(self, state, log, t):
@@ -293,9 +312,7 @@ class DEMBed(DEMMotion):
         rec = log["recorder"]
         if rec is None:
             return {}
-        a = rec.arrays()
-        a["positions_full"] = np.stack([np.asarray(p) for p in rec.positions])  # not float32
-        return {"recorder": a}
+        return {"recorder": rec.arrays()}
 
     def load_log(self, arrays, log):
         if "recorder" in arrays:
@@ -317,7 +334,7 @@ class DEMBed(DEMMotion):
         cycle = cfg.replayed_cycle
         rec = log["recorder"]
         n_rec = len(rec.pair_ptr) - 1
-        recording = Recording(rec.arrays(), first=n_rec - int(round(cycle / cfg.record_interval)))
+        recording = Recording(rec.arrays(first=n_rec - int(round(cycle / cfg.record_interval))))
         model = eqx.combine(state.extra.model, self._skeleton)
         g0 = recording.n_intervals  # the first step restarts the cycle
         log = dict(log, recording=recording, g0=g0)

@@ -34,7 +34,7 @@ from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.network import ContactNetwork
 
-__all__ = ["Recording", "ReplayBed", "restart_assignment", "read_recording"]
+__all__ = ["Recording", "ReplayBed", "restart_assignment", "bisection_blocks", "read_recording"]
 
 
 def _pad_csr(ptr, cols, fill, dtype):
@@ -48,22 +48,76 @@ def _pad_csr(ptr, cols, fill, dtype):
     return out
 
 
-def restart_assignment(end_pos, start_pos, group) -> np.ndarray:
+#: largest group (particles) whose restart assignment is solved over all its particles at once;
+#: larger groups are cut into blocks of at most this many (:func:`restart_assignment`)
+ASSIGNMENT_BLOCK = 2048
+
+
+def restart_assignment(end_pos, start_pos, group, block: int = ASSIGNMENT_BLOCK) -> np.ndarray:
     """Particle whose temperature each particle takes at a cyclic restart.
 
     ``match[b] = a``: particle b, back at its recorded start position, takes the temperature of
-    particle a of the same group whose end position is closest (optimal assignment of squared
-    distances, scipy's ``linear_sum_assignment``, per group).
+    particle a of the same group whose end position is closest: an optimal assignment of
+    squared distances (scipy's ``linear_sum_assignment``) per group.
+
+    A group of more than ``block`` particles is first cut into blocks by recursive median
+    bisection (:func:`bisection_blocks`), and the assignment is optimal within each block. The
+    dense assignment needs a ``(n, n)`` cost matrix and up to O(n^3) time, which a group of
+    50 000 particles cannot afford (20 GB); the blocks keep both to O(n block) (a block's
+    matrix is 32 MB at the default 2048). The start and end positions are two samples of the
+    same bed, so the two halves of a cut cover the same region up to about a particle spacing,
+    and the field is carried over as closely (the cost against the optimum is measured in
+    docs/models/replay.md).
     """
     from scipy.optimize import linear_sum_assignment
 
+    end_pos, start_pos = np.asarray(end_pos, float), np.asarray(start_pos, float)
     match = np.arange(len(group))
     for g in np.unique(group):
         idx = np.nonzero(group == g)[0]
-        cost = np.sum((start_pos[idx, None, :] - end_pos[None, idx, :]) ** 2, axis=-1)
-        rows, cols = linear_sum_assignment(cost)
-        match[idx[rows]] = idx[cols]
+        for b, a in bisection_blocks(start_pos[idx], end_pos[idx], block):
+            rows, cols = linear_sum_assignment(squared_distances(start_pos[idx[b]],
+                                                                 end_pos[idx[a]]))
+            match[idx[b[rows]]] = idx[a[cols]]
     return match
+
+
+def squared_distances(x, y) -> np.ndarray:
+    """``(len(x), len(y))`` squared distances, one axis at a time: two such arrays alive at
+    once instead of the three-times larger ``(len(x), len(y), dim)`` differences (the same
+    sums in the same order)."""
+    out = np.zeros((len(x), len(y)))
+    for k in range(x.shape[1]):
+        d = x[:, k, None] - y[None, :, k]
+        d *= d
+        out += d
+    return out
+
+
+def bisection_blocks(start, end, block: int) -> list:
+    """Cut two equal-sized point sets into blocks of at most ``block`` points of each.
+
+    Each cut splits both sets at their median along the axis on which the two together extend
+    furthest, the same number of points of each on each side (the lower ``n // 2`` of both go
+    to one side), and is repeated until a block holds at most ``block``. Returns a list of
+    ``(b, a)`` index arrays into ``start`` and ``end`` of equal length, covering each set once.
+    """
+    n = len(start)
+    if len(end) != n or block < 1:
+        raise ValueError(f"bisection_blocks needs equal sets and block >= 1, got {n}, "
+                         f"{len(end)}, {block}")
+    todo, blocks = [(np.arange(n), np.arange(n))], []
+    while todo:
+        b, a = todo.pop()
+        if len(b) <= block:
+            blocks.append((b, a))
+            continue
+        both = np.concatenate([start[b], end[a]])
+        axis = int(np.argmax(np.ptp(both, axis=0)))
+        h = len(b) // 2
+        ob, oa = np.argpartition(start[b, axis], h), np.argpartition(end[a, axis], h)
+        todo += [(b[ob[:h]], a[oa[:h]]), (b[ob[h:]], a[oa[h:]])]
+    return blocks
 
 
 class Recording:

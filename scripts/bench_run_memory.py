@@ -1,0 +1,144 @@
+"""Peak memory of a whole product run, phase by phase: glass-drum-3d through ``drumheat.run``.
+
+``bench_memory.py`` measures the DEM chunk alone; a user's run holds more: the set-up, the
+contact recording of ``dem.record_interval`` (it grows with the recorded time), the switch to the
+cyclic replay at ``dem.replay_after`` (the recording turned into padded networks and the restart
+assignment), the replay and the result files. For each N this runs the built-in scene
+``glass-drum-3d`` (its knob: depth = N x 2.6e-5 m) from a packing file, shortened to
+``--duration`` with the replay after ``--replay-after`` (cycle: half of it), in a fresh process,
+with a thread that attributes the resident memory's high-water mark (``VmHWM``, reset through
+``/proc/self/clear_refs`` at each change of phase; sampled every 50 ms) to the phase the run is
+in, told by the function on the main thread's stack. Printed: each phase's peak above the
+resident memory before the run, and the slope between successive N (kB per particle), which
+leaves out what does not grow with N (compiled code, the compiler's own peak). (The resets
+also lower the process's ``ru_maxrss``, so the run's own ``summary.json`` ``peak_memory_MB`` is
+not a measure here.)
+
+Usage: python scripts/bench_run_memory.py --n 10000 50000 [--packings DIR]
+       [--duration 0.3] [--replay-after 0.2]
+The packings are ``bench_vs_liggghts.py``'s (poured there the first time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+#: (function on the main thread's stack, phase), innermost match wins
+PHASES = (("write_results", "result files"), ("complete", "result files"),
+          ("_switch_to_replay", "switch to replay"), ("between", "recording"),
+          ("finish", "trajectory"), ("make_result", "trajectory"),
+          ("advance_checked", "steps"), ("estimate", "estimate"),
+          ("make_motion", "set-up"), ("initial_state", "set-up"))
+
+
+def _status(field: str) -> float:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1024.0
+    raise KeyError(field)
+
+
+def phase_of(frame) -> str:
+    names = []
+    while frame is not None:
+        names.append(frame.f_code.co_name)
+        frame = frame.f_back
+    for name in names:  # innermost first
+        for fn, phase in PHASES:
+            if name == fn:
+                return phase
+    return "other"
+
+
+def measure(n: int, duration: float, replay_after: float, packings) -> dict:
+    """Run the scene in this process and return the peaks per phase (MB) and the summary's."""
+    sys.path.insert(0, str(HERE))
+    from bench_vs_liggghts import scene_for, scene_packing
+
+    import drumheat
+
+    packing = scene_packing(n, packings)
+    scene = scene_for(n, "auto", packing).with_overrides(
+        {"run.duration": duration, "run.output_interval": replay_after / 2,
+         "dem.replay_after": replay_after, "dem.replay_cycle": replay_after / 2})
+    main = threading.main_thread()
+    peaks, current, done = {}, ["start"], threading.Event()
+
+    def close(phase):
+        peaks[phase] = max(peaks.get(phase, 0.0), _status("VmHWM"))
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+
+    def watch():
+        while not done.is_set():
+            ph = phase_of(sys._current_frames().get(main.ident))
+            if ph != current[0]:
+                close(current[0])
+                current[0] = ph
+            time.sleep(0.05)
+
+    base = _status("VmRSS")
+    t = threading.Thread(target=watch, daemon=True)
+    t.start()
+    with tempfile.TemporaryDirectory() as out:
+        drumheat.run(scene, out=Path(out) / "run", progress=False, allow_long=True)
+        done.set()
+        t.join()
+        close(current[0])
+    return dict(n=n, base_mb=base, peaks=peaks)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[10000, 50000])
+    ap.add_argument("--duration", type=float, default=0.3)
+    ap.add_argument("--replay-after", type=float, default=0.2)
+    ap.add_argument("--packings", default=None,
+                    help="folder of the scene's poured beds (glass-drum-3d_N.npz)")
+    ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child is not None:
+        print(json.dumps(measure(args.child, args.duration, args.replay_after, args.packings)))
+        return
+    print(f"glass-drum-3d, {args.duration:g} s simulated, replay after {args.replay_after:g} s: "
+          "the resident memory's peak in each phase above the resident memory before the run "
+          "(imports), MB; last rows: the slope between successive N, kB per particle")
+    order = ["set-up", "estimate", "steps", "recording", "switch to replay", "trajectory",
+             "result files"]
+    print("| N | " + " | ".join(order) + " | whole run | before the run (MB) |")
+    print("|---|" + "---|" * (len(order) + 2))
+    rows = []
+    for n in args.n:
+        env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="1048576")
+        cmd = [sys.executable, __file__, "--child", str(n), "--duration", str(args.duration),
+               "--replay-after", str(args.replay_after)]
+        if args.packings:
+            cmd += ["--packings", args.packings]
+        out = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        if out.returncode:
+            print(f"| {n} | failed (exit {out.returncode}): {out.stderr.strip()[-300:]} |")
+            continue
+        d = json.loads(out.stdout.strip().splitlines()[-1])
+        added = [d["peaks"].get(p, float("nan")) - d["base_mb"] for p in order]
+        added.append(max(d["peaks"].values()) - d["base_mb"])
+        rows.append((n, added))
+        print(f"| {n} | " + " | ".join(f"{a:.0f}" for a in added) + f" | {d['base_mb']:.0f} |",
+              flush=True)
+    for (n0, a0), (n1, a1) in zip(rows, rows[1:]):
+        print(f"| {n0} -> {n1} (kB per particle) | " + " | ".join(
+            f"{(y - x) * 1024 / (n1 - n0):.2f}" for x, y in zip(a0, a1)) + " | |")
+
+
+if __name__ == "__main__":
+    main()
