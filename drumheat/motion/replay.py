@@ -34,7 +34,8 @@ from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene, SceneError
 from drumheat.thermal.network import ContactNetwork
 
-__all__ = ["Recording", "ReplayBed", "restart_assignment", "bisection_blocks", "read_recording"]
+__all__ = ["Recording", "ReplayBed", "restart_assignment", "bisection_blocks", "squared_distances",
+           "read_recording"]
 
 
 def _pad_csr(ptr, cols, fill, dtype):
