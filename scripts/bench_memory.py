@@ -85,7 +85,7 @@ def build(n_: int, kernel: str = "jax", conduction: str = "extra"):
     return dem, dem.init(pos, extra=T0)
 
 
-def _proc_status(field: str) -> float:
+def proc_status(field: str) -> float:
     """A memory field of /proc/self/status (VmRSS, VmHWM), MB."""
     with open("/proc/self/status") as f:
         for line in f:
@@ -114,12 +114,12 @@ def measure(n: int, steps: int, kernel: str = "jax", conduction: str = "extra") 
     # run alone
     st = dem.run(st, 1, chunk=1)
     jax.block_until_ready(st.position)
-    before = _proc_status("VmRSS")
+    before = proc_status("VmRSS")
     with open("/proc/self/clear_refs", "w") as f:
         f.write("5")
     st = dem.run(st, steps, chunk=steps)
     jax.block_until_ready(st.position)
-    run_peak = _proc_status("VmHWM") - before
+    run_peak = proc_status("VmHWM") - before
     peak = rss_mb()
     leaves = jax.tree_util.tree_leaves(st)
     state_bytes = sum(x.nbytes for x in leaves if hasattr(x, "nbytes"))

@@ -32,6 +32,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from bench_memory import proc_status  # noqa: E402
 
 #: (function on the main thread's stack, phase), innermost match wins
 PHASES = (("write_results", "result files"), ("complete", "result files"),
@@ -39,14 +42,6 @@ PHASES = (("write_results", "result files"), ("complete", "result files"),
           ("finish", "trajectory"), ("make_result", "trajectory"),
           ("advance_checked", "steps"), ("estimate", "estimate"),
           ("make_motion", "set-up"), ("initial_state", "set-up"))
-
-
-def _status(field: str) -> float:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith(field + ":"):
-                return int(line.split()[1]) / 1024.0
-    raise KeyError(field)
 
 
 def phase_of(frame) -> str:
@@ -63,7 +58,6 @@ def phase_of(frame) -> str:
 
 def measure(n: int, duration: float, replay_after: float, packings) -> dict:
     """Run the scene in this process and return the peaks per phase (MB) and the summary's."""
-    sys.path.insert(0, str(HERE))
     from bench_vs_liggghts import scene_for, scene_packing
 
     import drumheat
@@ -76,7 +70,7 @@ def measure(n: int, duration: float, replay_after: float, packings) -> dict:
     peaks, current, done = {}, ["start"], threading.Event()
 
     def close(phase):
-        peaks[phase] = max(peaks.get(phase, 0.0), _status("VmHWM"))
+        peaks[phase] = max(peaks.get(phase, 0.0), proc_status("VmHWM"))
         with open("/proc/self/clear_refs", "w") as f:
             f.write("5")
 
@@ -88,7 +82,7 @@ def measure(n: int, duration: float, replay_after: float, packings) -> dict:
                 current[0] = ph
             time.sleep(0.05)
 
-    base = _status("VmRSS")
+    base = proc_status("VmRSS")
     t = threading.Thread(target=watch, daemon=True)
     t.start()
     with tempfile.TemporaryDirectory() as out:
