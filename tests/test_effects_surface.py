@@ -12,7 +12,7 @@ from drumheat.motion.static import StaticBed
 from drumheat.models import convection as corr
 from drumheat.models.sphere_conduction import sphere_mean_temperature
 from drumheat.scene import SceneError, load_scene, scene_from_dict
-from drumheat.thermal.integrate import _vector_field, initial_state
+from drumheat.thermal.solvers import _vector_field, initial_state
 from drumheat.thermal.radiation import Radiation
 
 SIGMA = 5.670374419e-8

@@ -22,7 +22,7 @@ from drumheat.motion.static import StaticBed
 from drumheat.motion import make_motion
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 from drumheat.thermal import internal
-from drumheat.thermal.integrate import initial_state
+from drumheat.thermal.solvers import initial_state
 
 
 def check(res, lo, hi, balance=1e-8):

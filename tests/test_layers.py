@@ -125,3 +125,17 @@ def test_no_import_cycles():
 def test_every_module_is_in_a_layer():
     for name in MODULES:
         unit(name)
+
+
+def test_an_old_import_path_warns_and_gives_the_module_at_its_new_place():
+    """drumheat._aliases: a module moved in the layered layout is still importable by its old
+    path for one release, with a DeprecationWarning naming the new one."""
+    import importlib
+    import sys
+
+    import drumheat.thermal.solvers as new
+
+    sys.modules.pop("drumheat.thermal.integrate", None)
+    with pytest.warns(DeprecationWarning, match="moved to 'drumheat.thermal.solvers'"):
+        old = importlib.import_module("drumheat.thermal.integrate")
+    assert old is new

@@ -11,7 +11,7 @@ from drumheat.motion.static import StaticBed
 from drumheat.results.result import energy_balance
 from drumheat.scene import SceneError, load_scene, scene_from_dict
 from drumheat.thermal.contact import ContactConduction
-from drumheat.thermal.integrate import _vector_field, initial_state
+from drumheat.thermal.solvers import _vector_field, initial_state
 
 
 def closed_bed(**run):
