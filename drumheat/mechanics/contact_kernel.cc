@@ -335,8 +335,9 @@ inline S overlap_before(const S* xi, const S* xj, const S* vi, const S* vj, S rs
 // The contact law of up to Tile::N pair slots within reach, one array per quantity (structure
 // of arrays): Loop::tile gathers the slots' data into it, pair_law_tile computes the law of all
 // of them in one loop without branches, which the compiler runs in vector instructions (several
-// contacts per instruction), and Loop::tile puts the results out slot by slot. 49 arrays of 64 (3D, float64; 61 with friction heat): 25 kB (31 kB), about the size of
-// a core's first-level cache.
+// contacts per instruction), and Loop::tile puts the results out slot by slot. 49 arrays of
+// 64 (3D, float64; 61 with friction heat): 25 kB (31 kB), about the size of a core's
+// first-level cache.
 template <typename S, int D>
 struct Tile {
   static constexpr int DW = D == 3 ? 3 : 1;
@@ -426,13 +427,14 @@ struct Block {
 };
 
 // The Block of the pair slots k of (pi, pj) [0, cnt): d from i to j (the nearest periodic image
-// of the last axis with PERIODIC) and |d|^2, and whether the pair lies within reach, i.e. its centre distance |d| is at most the bound r_i + r_j + max(gap, cg) beyond
-// which it can neither touch, conduct across the gap (gap = gapf d_min, gapf the conduction gap
-// tolerance, 0 without one) nor count in output 11 (cg = cgap d_min): the exact tests of Loop::tile
-// (on the overlap, as the JAX kernel decides) cannot pass beyond it (the factor
-// 1.0001 on the squares keeps round-off on the safe side). 0 for a padding slot (i >= n). One loop
-// without branches over the slots, in vector instructions: the partners' data are read for every
-// listed pair here, and about three in four lie out of reach in a turning bed.
+// of the last axis with PERIODIC) and |d|^2, and whether the pair lies within reach, i.e. its
+// centre distance |d| is at most the bound r_i + r_j + max(gap, cg) beyond which it can neither
+// touch, conduct across the gap (gap = gapf d_min, gapf the conduction gap tolerance, 0 without
+// one) nor count in output 11 (cg = cgap d_min): the exact tests of Loop::tile (on the overlap,
+// as the JAX kernel decides) cannot pass beyond it (the factor 1.0001 on the squares keeps
+// round-off on the safe side). 0 for a padding slot (i >= n). One loop without branches over
+// the slots, in vector instructions: the partners' data are read for every listed pair here,
+// and about three in four lie out of reach in a turning bed.
 template <typename S, int D, bool PERIODIC>
 DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int32_t* __restrict pj,
                                          int cnt, const S* __restrict x, const S* __restrict r,
