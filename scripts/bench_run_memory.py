@@ -8,14 +8,23 @@ assignment), the replay and the result files. For each N this runs the built-in 
 ``--duration`` with the replay after ``--replay-after`` (cycle: half of it), in a fresh process,
 with a thread that attributes the resident memory's high-water mark (``VmHWM``, reset through
 ``/proc/self/clear_refs`` at each change of phase; sampled every 50 ms) to the phase the run is
-in, told by the function on the main thread's stack. Printed: each phase's peak above the
+in, told by the function on the main thread's stack, and the anonymous resident memory
+(``RssAnon``: without the pages of mapped files, which count in ``VmHWM`` while they are
+mapped but which the system can drop) sampled alike. Printed: each phase's peak above the
 resident memory before the run, and the slope between successive N (kB per particle), which
 leaves out what does not grow with N (compiled code, the compiler's own peak). (The resets
 also lower the process's ``ru_maxrss``, so the run's own ``summary.json`` ``peak_memory_MB`` is
 not a measure here.)
 
+With ``--record-interval`` (the scene's is 0.05 s) a short run records as many intervals as a
+long one (``--record-interval 0.002 --duration 0.5 --replay-after 0.4``: 200 intervals, as the
+built-in drum's 250 by its switch), so that the recording's share of the peak shows. A run
+writes into a result folder (as ``drumheat run`` does), where it keeps its recording in files
+(``.log/``); ``--no-folder`` runs without one (``drumheat.run(scene)`` in a notebook), which
+keeps it in memory.
+
 Usage: python scripts/bench_run_memory.py --n 10000 50000 [--packings DIR]
-       [--duration 0.3] [--replay-after 0.2]
+       [--duration 0.3] [--replay-after 0.2] [--record-interval S] [--no-folder]
 The packings are ``bench_vs_liggghts.py``'s (poured there the first time).
 """
 
@@ -56,18 +65,21 @@ def phase_of(frame) -> str:
     return "other"
 
 
-def measure(n: int, duration: float, replay_after: float, packings) -> dict:
+def measure(n: int, duration: float, replay_after: float, packings, record_interval=None,
+            folder: bool = True) -> dict:
     """Run the scene in this process and return the peaks per phase (MB) and the summary's."""
     from bench_vs_liggghts import scene_for, scene_packing
 
     import drumheat
 
     packing = scene_packing(n, packings)
-    scene = scene_for(n, "auto", packing).with_overrides(
-        {"run.duration": duration, "run.output_interval": replay_after / 2,
-         "dem.replay_after": replay_after, "dem.replay_cycle": replay_after / 2})
+    over = {"run.duration": duration, "run.output_interval": replay_after / 2,
+            "dem.replay_after": replay_after, "dem.replay_cycle": replay_after / 2}
+    if record_interval is not None:
+        over["dem.record_interval"] = record_interval
+    scene = scene_for(n, "auto", packing).with_overrides(over)
     main = threading.main_thread()
-    peaks, current, done = {}, ["start"], threading.Event()
+    peaks, anon, current, done = {}, {}, ["start"], threading.Event()
 
     def close(phase):
         peaks[phase] = max(peaks.get(phase, 0.0), proc_status("VmHWM"))
@@ -80,17 +92,20 @@ def measure(n: int, duration: float, replay_after: float, packings) -> dict:
             if ph != current[0]:
                 close(current[0])
                 current[0] = ph
+            anon[ph] = max(anon.get(ph, 0.0), proc_status("RssAnon"))
             time.sleep(0.05)
 
-    base = proc_status("VmRSS")
+    base, base_anon = proc_status("VmRSS"), proc_status("RssAnon")
     t = threading.Thread(target=watch, daemon=True)
     t.start()
     with tempfile.TemporaryDirectory() as out:
-        drumheat.run(scene, out=Path(out) / "run", progress=False, allow_long=True)
+        drumheat.run(scene, out=Path(out) / "run" if folder else None, progress=False,
+                     allow_long=True)
         done.set()
         t.join()
         close(current[0])
-    return dict(n=n, base_mb=base, peaks=peaks)
+    return dict(n=n, base_mb=base, peaks=peaks, anon=anon,
+                base_anon_mb=base_anon)
 
 
 def main():
@@ -100,25 +115,37 @@ def main():
     ap.add_argument("--replay-after", type=float, default=0.2)
     ap.add_argument("--packings", default=None,
                     help="folder of the scene's poured beds (glass-drum-3d_N.npz)")
+    ap.add_argument("--record-interval", type=float, default=None,
+                    help="dem.record_interval, s (default: the scene's)")
+    ap.add_argument("--no-folder", action="store_true",
+                    help="run without a result folder (the recording stays in memory)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
-        print(json.dumps(measure(args.child, args.duration, args.replay_after, args.packings)))
+        print(json.dumps(measure(args.child, args.duration, args.replay_after, args.packings,
+                                 args.record_interval, not args.no_folder)))
         return
-    print(f"glass-drum-3d, {args.duration:g} s simulated, replay after {args.replay_after:g} s: "
-          "the resident memory's peak in each phase above the resident memory before the run "
+    rec = (f"recording every {args.record_interval:g} s" if args.record_interval
+           else "the scene's recording interval")
+    print(f"glass-drum-3d, {args.duration:g} s simulated, replay after {args.replay_after:g} s, "
+          f"{rec}, {'no result folder' if args.no_folder else 'into a result folder'}: the "
+          "resident memory's peak in each phase above the resident memory before the run "
           "(imports), MB; last rows: the slope between successive N, kB per particle")
     order = ["set-up", "estimate", "steps", "recording", "switch to replay", "trajectory",
              "result files"]
     print("| N | " + " | ".join(order) + " | whole run | before the run (MB) |")
     print("|---|" + "---|" * (len(order) + 2))
-    rows = []
+    rows, anon_rows = [], []
     for n in args.n:
         env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="1048576")
         cmd = [sys.executable, __file__, "--child", str(n), "--duration", str(args.duration),
                "--replay-after", str(args.replay_after)]
         if args.packings:
             cmd += ["--packings", args.packings]
+        if args.record_interval:
+            cmd += ["--record-interval", str(args.record_interval)]
+        if args.no_folder:
+            cmd.append("--no-folder")
         out = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if out.returncode:
             print(f"| {n} | failed (exit {out.returncode}): {out.stderr.strip()[-300:]} |")
@@ -127,8 +154,23 @@ def main():
         added = [d["peaks"].get(p, float("nan")) - d["base_mb"] for p in order]
         added.append(max(d["peaks"].values()) - d["base_mb"])
         rows.append((n, added))
+        anon_rows.append((n, [d["anon"].get(p, float("nan")) - d["base_anon_mb"] for p in order]
+                          + [max(d["anon"].values()) - d["base_anon_mb"]], d["base_anon_mb"]))
         print(f"| {n} | " + " | ".join(f"{a:.0f}" for a in added) + f" | {d['base_mb']:.0f} |",
               flush=True)
+    slopes(rows)
+    print("\nThe anonymous resident memory (RssAnon: what the process allocated, without the "
+          "pages of mapped files, which the system can drop), sampled every 50 ms, the same "
+          "columns:")
+    print("| N | " + " | ".join(order) + " | whole run | before the run (MB) |")
+    print("|---|" + "---|" * (len(order) + 2))
+    for n, added, base in anon_rows:
+        print(f"| {n} | " + " | ".join(f"{a:.0f}" for a in added) + f" | {base:.0f} |")
+    slopes([r[:2] for r in anon_rows])
+
+
+def slopes(rows):
+    """Print the slope rows (kB per particle) between successive N of a table."""
     for (n0, a0), (n1, a1) in zip(rows, rows[1:]):
         print(f"| {n0} -> {n1} (kB per particle) | " + " | ".join(
             f"{(y - x) * 1024 / (n1 - n0):.2f}" for x, y in zip(a0, a1)) + " | |")

@@ -211,39 +211,84 @@ def test_replay_after_continues_the_coupled_run_cyclically():
     assert np.isnan(res.timeseries["interfraction_contacts"].iloc[-1])
 
 
-def test_recording_from_an_interval_on_is_what_the_replay_keeps_of_it():
+def _random_recorder(rng, n, k, directory=None):
+    """A ContactRecorder of ``k`` random intervals (``directory``: its files there)."""
+    from drumheat.motion.dem import ContactRecorder
+
+    rec = ContactRecorder(n, 1, 0.01, wall_heated=np.ones(1, bool), wall_ids=np.zeros(1, int),
+                          diameter=np.full(n, 0.01), group=np.zeros(n, int), scene_toml="",
+                          directory=directory)
+    rec.add_positions(rng.normal(size=(n, 3)))
+    c = rec.columns
+    for _ in range(k):
+        m, w = rng.integers(0, 6), rng.integers(0, 3)
+        c["pair_i"].append(rng.integers(0, n, m))
+        c["pair_j"].append(rng.integers(0, n, m))
+        c["pair_duration"].append(rng.uniform(0, 0.01, m))
+        rec.pair_ptr.append(rec.pair_ptr[-1] + m)
+        c["wall_particle"].append(rng.integers(0, n, w))
+        c["wall_index"].append(np.zeros(w, np.int32))
+        c["wall_duration"].append(rng.uniform(0, 0.01, w))
+        rec.wall_ptr.append(rec.wall_ptr[-1] + w)
+        rec.add_positions(rng.normal(size=(n, 3)))
+    return rec
+
+
+def test_recording_from_an_interval_on_is_what_the_replay_keeps_of_it(tmp_path):
     """ContactRecorder.arrays(first) (what the switch to the replay takes) equals the whole
     recording cut the way Recording(rec, first) cuts it, for a recorder filled interval by
-    interval and for one restored from a checkpoint (one array per quantity)."""
+    interval and for one restored from a checkpoint (one array per quantity), in memory and
+    with its intervals in files."""
     from drumheat.motion.dem import ContactRecorder
     from drumheat.motion.replay import Recording
 
-    rng = np.random.default_rng(0)
     n, k = 6, 5
-    rec = ContactRecorder(n, 1, 0.01, wall_heated=np.ones(1, bool), wall_ids=np.zeros(1, int),
-                          diameter=np.full(n, 0.01), group=np.zeros(n, int), scene_toml="")
-    rec.add_positions(rng.normal(size=(n, 3)))
-    for _ in range(k):
-        m, w = rng.integers(0, 6), rng.integers(0, 3)
-        rec.pair_i.append(rng.integers(0, n, m).astype(np.int32))
-        rec.pair_j.append(rng.integers(0, n, m).astype(np.int32))
-        rec.pair_dur.append(rng.uniform(0, 0.01, m))
-        rec.pair_ptr.append(rec.pair_ptr[-1] + m)
-        rec.wall_p.append(rng.integers(0, n, w).astype(np.int32))
-        rec.wall_k.append(np.zeros(w, np.int32))
-        rec.wall_dur.append(rng.uniform(0, 0.01, w))
-        rec.wall_ptr.append(rec.wall_ptr[-1] + w)
-        rec.add_positions(rng.normal(size=(n, 3)))
-    restored = ContactRecorder.from_arrays(rec.arrays())
-    for first in range(k):
-        whole = Recording(rec.arrays(), first=first)
-        for r in (rec, restored):
-            cut = Recording(r.arrays(first=first))
-            for a, b in zip(jax.tree_util.tree_leaves((whole.pairs, whole.walls)),
-                            jax.tree_util.tree_leaves((cut.pairs, cut.walls))):
-                np.testing.assert_array_equal(a, b)
-            np.testing.assert_array_equal(whole.positions, cut.positions)
-            np.testing.assert_array_equal(whole.match, cut.match)
+    for directory in (None, tmp_path / "log"):
+        rec = _random_recorder(np.random.default_rng(0), n, k, directory)
+        restored = ContactRecorder.from_arrays(rec.checkpoint_arrays(), directory)
+        for first in range(k):
+            whole = Recording(rec.arrays(), first=first)
+            for r in (rec, restored):
+                cut = Recording(r.arrays(first=first))
+                for a, b in zip(jax.tree_util.tree_leaves((whole.pairs, whole.walls)),
+                                jax.tree_util.tree_leaves((cut.pairs, cut.walls))):
+                    np.testing.assert_array_equal(a, b)
+                np.testing.assert_array_equal(whole.positions, cut.positions)
+                np.testing.assert_array_equal(whole.match, cut.match)
+
+
+def test_recording_in_files_is_the_recording_in_memory(tmp_path):
+    """A recorder with a directory gives the arrays of one in memory (the same dtypes), reads
+    them memory-mapped, holds no interval in memory, and its checkpoint arrays hold only the
+    pointers; a recorder adopting the files after a stop cuts off what was written past the
+    checkpoint and goes on from there."""
+    from drumheat.motion.dem import ContactRecorder
+
+    n, k = 7, 6
+    mem = _random_recorder(np.random.default_rng(1), n, k)
+    disk = _random_recorder(np.random.default_rng(1), n, k, tmp_path / "log")
+    a, b = mem.arrays(), disk.arrays()
+    assert a.keys() == b.keys()
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key])
+        assert np.asarray(a[key]).dtype == np.asarray(b[key]).dtype
+    assert isinstance(b["pair_i"], np.memmap) and isinstance(b["positions"], np.memmap)
+    assert not any(col._blocks for col in disk.columns.values())
+    ck = disk.checkpoint_arrays()
+    assert ck["spooled"] and not ({"pair_i", "positions"} & set(ck))
+    assert {"pair_i", "positions"} <= set(mem.checkpoint_arrays())
+    # a stop after the checkpoint: two more intervals written, then the run resumes
+    for _ in range(2):
+        disk.columns["pair_i"].append(np.arange(3))
+        disk.add_positions(np.zeros((n, 3)))
+    again = ContactRecorder.from_arrays(ck, tmp_path / "log")
+    for key, v in again.arrays().items():
+        np.testing.assert_array_equal(v, a[key])
+    again.add_positions(np.ones((n, 3)))
+    np.testing.assert_array_equal(again.arrays()["positions"][:-1], a["positions"])
+    np.testing.assert_array_equal(again.arrays()["positions"][-1], 1.0)
+    with pytest.raises(ValueError, match="directory"):
+        ContactRecorder.from_arrays(ck)
 
 
 def test_builtin_dem_scenes_load_and_build():

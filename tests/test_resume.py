@@ -120,6 +120,35 @@ def test_dem_with_replay_after_resumes_bit_for_bit(chunk, tmp_path, monkeypatch)
     assert res.summary["energy_balance_rel_error"] < 1e-12
 
 
+def test_recording_stays_in_the_folder_and_resumes(tmp_path, monkeypatch):
+    """The contact recording of a run with a result folder goes to ``.log/`` as it is
+    recorded; the checkpoint names its lengths instead of holding it; the resumed run gives
+    the numbers of a run without a folder (recording in memory), and its ``contacts.npz`` is
+    that of a run that was not interrupted, array for array."""
+    scene = dem_scene(**{"run.duration": 0.3, "run.output_interval": 0.1,
+                         "dem.record_interval": 0.025})
+    dh.run(scene, out=tmp_path / "ref", progress=False)
+    out = tmp_path / "run"
+    with monkeypatch.context() as m:
+        kill_at(m, "dem", 7)
+        with pytest.raises(Killed):
+            dh.run(scene, out=out, progress=False)
+    assert (out / ".log" / "contacts.pair_i.bin").stat().st_size > 0
+    with np.load(out / "checkpoint.npz") as ck:
+        assert ck["log/recorder/spooled"] and "log/recorder/pair_i" not in ck.files
+        assert len(ck["log/recorder/pair_ptr"]) == 7  # six intervals recorded before the stop
+    res = dh.run(scene, out=out, progress=False, resume=True)
+    assert_identical(res, dh.run(scene, progress=False))  # as the run with it in memory
+    assert not (out / ".log").exists()  # the complete result replaced the running folder
+    res.save(tmp_path / "again", figures=False)  # the result still has its recording
+    for folder in (out, tmp_path / "again"):
+        with np.load(tmp_path / "ref" / "contacts.npz") as a, \
+                np.load(folder / "contacts.npz") as b:
+            assert a.files == b.files
+            for key in a.files:
+                np.testing.assert_array_equal(a[key], b[key])
+
+
 def test_replay_resumes_bit_for_bit(tmp_path, monkeypatch):
     rec = dem_scene(**{"dem.record_interval": 0.01})
     dh.run(rec, out=tmp_path / "rec", progress=False)

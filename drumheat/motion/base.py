@@ -100,9 +100,11 @@ class AbstractMotion(abc.ABC):
         with larger neighbour buffers); an exception stops the run."""
         return None
 
-    def start_log(self, state, params: dict | None = None) -> Any:
+    def start_log(self, state, params: dict | None = None, spool=None) -> Any:
         """Host-side record a run keeps between chunks (e.g. the contact recording); it may
-        keep the run's ``params`` for :meth:`finish`."""
+        keep the run's ``params`` for :meth:`finish`. ``spool``: a folder where the log may
+        keep its large arrays on disk (a run with a result folder: ``<out>/.log``), or None
+        (in memory)."""
         return None
 
     def between(self, state, log, t: float):
@@ -140,9 +142,10 @@ class AbstractMotion(abc.ABC):
         """The host-side log as a (nested) dict of arrays, for a checkpoint."""
         return {}
 
-    def load_log(self, arrays: dict, log):
+    def load_log(self, arrays: dict, log, spool=None):
         """The log of a checkpoint: ``log`` (a fresh :meth:`start_log`) with ``arrays`` (what
-        :meth:`save_log` gave) put back."""
+        :meth:`save_log` gave) put back; ``spool``: the folder of :meth:`start_log`, where the
+        run that wrote the checkpoint kept its large arrays."""
         return log
 
     def restore_state(self, template, leaves: list, meta: dict, log):

@@ -25,6 +25,9 @@ checked after every chunk (an overflow redoes it with larger buffers).
 
 from __future__ import annotations
 
+from functools import partial
+from pathlib import Path
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -42,6 +45,7 @@ from drumheat.motion.coupling import (contact_count, initial_extra, make_thermal
 from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.replay import Recording
 from drumheat.motion.rows import stack_arrays, stack_rows
+from drumheat.motion.spooled_array import SpooledArray
 from drumheat.motion.static import drum_wall_arrays
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene
@@ -67,17 +71,33 @@ class ContactRecorder:
     """Collects the contact network per recording interval in compact (CSR-like) form.
 
     ``wall_heated``, ``wall_ids`` (per wall primitive), ``diameter``, ``group`` and the scene's
-    TOML text go into the recording unchanged (``contacts.npz``).
+    TOML text go into the recording unchanged (``contacts.npz``). With ``directory`` (a run
+    with a result folder: ``<out>/.log``) the recorded intervals go to files there as they
+    come (:class:`~drumheat.motion.spooled_array.SpooledArray`) and are read back
+    memory-mapped; without, they stay in memory.
     """
 
+    #: the growing arrays of the recording: dtype and the shape of one row (``"positions"``:
+    #: one row per interval end, float32 as ``contacts.npz`` stores them)
+    COLUMNS = {"pair_i": (np.int32, ()), "pair_j": (np.int32, ()),
+               "pair_duration": (np.float64, ()), "wall_particle": (np.int32, ()),
+               "wall_index": (np.int32, ()), "wall_duration": (np.float64, ()),
+               "positions": (np.float32, None)}
+
     def __init__(self, n, n_walls, interval, *, wall_heated, wall_ids, diameter, group,
-                 scene_toml: str):
+                 scene_toml: str, directory=None, lengths: dict | None = None):
         self.n, self.n_walls, self.interval = n, n_walls, interval
         self.static = dict(wall_heated=wall_heated, wall_ids=wall_ids, diameter=diameter,
                            group=group, scene=scene_toml)
-        self.pair_i, self.pair_j, self.pair_dur, self.pair_ptr = [], [], [], [0]
-        self.wall_p, self.wall_k, self.wall_dur, self.wall_ptr = [], [], [], [0]
-        self.positions = []
+        self.pair_ptr, self.wall_ptr = [0], [0]
+        self.directory = None if directory is None else Path(directory)
+        if self.directory is not None:
+            self.directory.mkdir(parents=True, exist_ok=True)
+        lengths = lengths or {}
+        self.columns = {key: SpooledArray(
+            dtype, (int(n), int(lengths["dim"])) if key == "positions" and "dim" in lengths
+            else row, None if self.directory is None else self.directory / f"contacts.{key}.bin",
+            lengths.get(key, 0)) for key, (dtype, row) in self.COLUMNS.items()}
 
     def add(self, idx, extra, position):
         """Record one interval: the neighbour pairs ``idx`` with their contact times
@@ -85,14 +105,15 @@ class ContactRecorder:
         and the positions at its end."""
         pt, wt = (np.asarray(a) for a in recorded_times(extra))
         keep = (idx[0] < self.n) & (pt > 0)
-        self.pair_i.append(idx[0][keep])
-        self.pair_j.append(idx[1][keep])
-        self.pair_dur.append(pt[keep])
+        c = self.columns
+        c["pair_i"].append(idx[0][keep])
+        c["pair_j"].append(idx[1][keep])
+        c["pair_duration"].append(pt[keep])
         self.pair_ptr.append(self.pair_ptr[-1] + int(keep.sum()))
         nz = np.nonzero(wt > 0)[0]
-        self.wall_p.append(nz // self.n_walls)
-        self.wall_k.append(nz % self.n_walls)
-        self.wall_dur.append(wt[nz])
+        c["wall_particle"].append(nz // self.n_walls)
+        c["wall_index"].append(nz % self.n_walls)
+        c["wall_duration"].append(wt[nz])
         self.wall_ptr.append(self.wall_ptr[-1] + len(nz))
         self.add_positions(position)
 
@@ -100,51 +121,72 @@ class ContactRecorder:
         """Keep the positions at the end of an interval (or the recording's start) in float32,
         as ``contacts.npz`` stores them: the recording grows by 12 bytes per particle and
         interval for them instead of 24."""
-        self.positions.append(np.asarray(position, np.float32))
+        self.columns["positions"].append(np.asarray(position, np.float32)[None])
 
     @classmethod
-    def from_arrays(cls, a: dict) -> "ContactRecorder":
-        """A recorder holding the recording ``a`` (what :meth:`arrays` gave)."""
+    def from_arrays(cls, a: dict, directory=None) -> "ContactRecorder":
+        """A recorder holding the recording ``a``: what :meth:`arrays` gave, or what
+        :meth:`checkpoint_arrays` gave of a recorder whose intervals are in the files of
+        ``directory`` (which are adopted, cut to the recorded lengths at the next interval)."""
+        pp, wp = (np.asarray(a[k], np.int64) for k in ("pair_ptr", "wall_ptr"))
+        spooled = bool(a.get("spooled", False))
+        if spooled and directory is None:
+            raise ValueError("the recording is in files of a result folder; give its directory")
+        lengths = {k: (int(pp[-1]) if k.startswith("pair") else int(wp[-1])) for k in
+                   cls.COLUMNS if k != "positions"}
+        lengths["positions"] = len(pp)
+        if spooled:
+            lengths["dim"] = int(a["dim"])
         rec = cls(int(a["n_particles"]), int(a["n_walls"]), float(a["interval"]),
                   wall_heated=a["wall_heated"], wall_ids=a["wall_ids"], diameter=a["diameter"],
-                  group=a["group"], scene_toml=str(a["scene"]))
-        rec.pair_i, rec.pair_j, rec.pair_dur = [a["pair_i"]], [a["pair_j"]], [a["pair_duration"]]
-        rec.pair_ptr = [int(x) for x in a["pair_ptr"]]
-        rec.wall_p, rec.wall_k, rec.wall_dur = ([a["wall_particle"]], [a["wall_index"]],
-                                                [a["wall_duration"]])
-        rec.wall_ptr = [int(x) for x in a["wall_ptr"]]
-        # checkpoints of earlier versions kept them in float64 as "positions_full"
-        rec.positions = [np.asarray(p, np.float32) for p in a.get("positions_full",
-                                                                   a["positions"])]
+                  group=a["group"], scene_toml=str(a["scene"]), directory=directory,
+                  lengths=lengths if spooled else None)
+        rec.pair_ptr, rec.wall_ptr = [int(x) for x in pp], [int(x) for x in wp]
+        if not spooled:
+            # checkpoints of earlier versions kept the positions in float64 as "positions_full"
+            blocks = dict(a, positions=a.get("positions_full", a["positions"]))
+            for key, column in rec.columns.items():
+                column.append(blocks[key])
         return rec
 
     def arrays(self, first: int = 0) -> dict:
         """The recording as arrays (the content of ``contacts.npz``); with ``first``, only
         intervals ``first`` to the last, as :class:`~drumheat.motion.replay.Recording` keeps
-        them (pointers and positions from that interval on), without the whole recording's
-        copy."""
-        def cat(xs, start, dt):  # the concatenation of xs from element `start` on
-            parts, seen = [], 0
-            for x in xs:
-                if seen + len(x) > start:
-                    parts.append(x[max(start - seen, 0):])
-                seen += len(x)
-            return np.concatenate(parts).astype(dt, copy=False) if parts else np.zeros(0, dt)
-
+        them (pointers and positions from that interval on). The recorded intervals come as
+        read-only memory maps of the files of a recorder with a ``directory``, else as copies."""
         pp, wp = (np.asarray(ptr[first:], np.int64) for ptr in (self.pair_ptr, self.wall_ptr))
-        return dict(
-            interval=self.interval, n_particles=self.n, n_walls=self.n_walls,
-            pair_i=cat(self.pair_i, pp[0], np.int32), pair_j=cat(self.pair_j, pp[0], np.int32),
-            pair_duration=cat(self.pair_dur, pp[0], np.float64), pair_ptr=pp - pp[0],
-            wall_particle=cat(self.wall_p, wp[0], np.int32),
-            wall_index=cat(self.wall_k, wp[0], np.int32),
-            wall_duration=cat(self.wall_dur, wp[0], np.float64), wall_ptr=wp - wp[0],
-            positions=np.stack(self.positions[first:]).astype(np.float32, copy=False),
-            **self.static)
+        start = {k: (pp[0] if k.startswith("pair") else wp[0]) for k in self.COLUMNS}
+        start["positions"] = first
+        out = {k: self.columns[k].read(int(start[k])) for k in self.COLUMNS}
+        return dict(interval=self.interval, n_particles=self.n, n_walls=self.n_walls,
+                    pair_ptr=pp - pp[0], wall_ptr=wp - wp[0], **out, **self.static)
+
+    def checkpoint_arrays(self) -> dict:
+        """What a checkpoint keeps of the recording: all of it in memory (:meth:`arrays`), or,
+        with a ``directory``, the pointers and the constants only (``spooled``), the intervals
+        staying in the files (:meth:`from_arrays` adopts them)."""
+        if self.directory is None:
+            return self.arrays()
+        return dict(interval=self.interval, n_particles=self.n, n_walls=self.n_walls,
+                    pair_ptr=np.asarray(self.pair_ptr, np.int64),
+                    wall_ptr=np.asarray(self.wall_ptr, np.int64), spooled=True,
+                    dim=self.columns["positions"].row_shape[-1], **self.static)
 
     def save(self, path):
         """Write ``contacts.npz``."""
-        np.savez_compressed(path, **self.arrays())
+        save_recording(self.arrays(), path)
+
+    def saver(self):
+        """:meth:`save` for a run's result (``Trajectory.files``). With a ``directory`` it
+        writes the intervals mapped now: a mapping outlives its file, which goes when the
+        complete result replaces the running folder."""
+        return self.save if self.directory is None else partial(save_recording, self.arrays())
+
+
+def save_recording(arrays: dict, path) -> None:
+    """Write the recording ``arrays`` (:meth:`ContactRecorder.arrays`) as ``contacts.npz``
+    (memory-mapped intervals are read in blocks as they are compressed)."""
+    np.savez_compressed(path, **arrays)
 
 
 @register
@@ -288,13 +330,13 @@ class DEMBed(DEMMotion):
         return self.dem.run_steps(self._start(state, t0), self._steps(t0, t1, self.dt))
 
 
-    def start_log(self, state, params=None):
+    def start_log(self, state, params=None, spool=None):
         rec = None
         if self.steps_per_record:
             rec = ContactRecorder(self.n, len(self.walls), self.dt * self.steps_per_record,
                                   wall_heated=self.wall_heated, wall_ids=self.wall_ids,
                                   diameter=self.diameter, group=self.group,
-                                  scene_toml=self.scene.to_toml())
+                                  scene_toml=self.scene.to_toml(), directory=spool)
             rec.add_positions(state.position)
         return {"recorder": rec, "recording": None, "g0": 0}
 
@@ -312,11 +354,11 @@ class DEMBed(DEMMotion):
         rec = log["recorder"]
         if rec is None:
             return {}
-        return {"recorder": rec.arrays()}
+        return {"recorder": rec.checkpoint_arrays()}
 
-    def load_log(self, arrays, log):
+    def load_log(self, arrays, log, spool=None):
         if "recorder" in arrays:
-            log = dict(log, recorder=ContactRecorder.from_arrays(arrays["recorder"]))
+            log = dict(log, recorder=ContactRecorder.from_arrays(arrays["recorder"], spool))
         return log
 
     def restore_state(self, template, leaves, meta, log):
@@ -394,7 +436,7 @@ class DEMBed(DEMMotion):
             mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),
             group=self.group,
             n_contacts=n_pairs, n_wall_contacts=n_wall, wall_area=d2 * cum_wall, extra=extra,
-            files={"contacts.npz": rec.save} if rec is not None else {},
+            files={"contacts.npz": rec.saver()} if rec is not None else {},
             info=self.backend_info(), mechanics=self.stack_mechanics(rows), drum_wall=wall)
 
     def _interfraction(self, positions) -> np.ndarray:

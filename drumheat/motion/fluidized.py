@@ -174,7 +174,7 @@ class FluidizedBed(ThermalBed):
                     else None, k=float(k[0]), A_per_f=float(A_f[0]), NTU=float(ntu[0]))
         return np.asarray(T), info
 
-    def start_log(self, state, params=None):
+    def start_log(self, state, params=None, spool=None):
         return {"params": params}
 
     def finish(self, rows, log, state) -> Trajectory:

@@ -44,6 +44,9 @@ RUN_LOCK = ".drumheat-run.lock"
 CHECKPOINT = "checkpoint.npz"
 #: folder of a running result that holds its particle frames (drumheat.motion.rows.RowSpool)
 FRAMES = ".frames"
+#: folder of a running result where the motion model's log keeps its large arrays (the contact
+#: recording of a DEM run, drumheat.motion.spooled_array.SpooledArray)
+LOG = ".log"
 
 
 class ResultFolderError(ValueError):
@@ -324,7 +327,8 @@ class RunFolder:
     false``), ``timeseries.csv`` growing row by row (flushed; the columns every run has:
     ``t``, ``T_mean``, ``T_mean:<group>``, ``T_min``, ``T_max`` and the heat accounts), the
     latest ``checkpoint.npz``, the particle frames so far in ``.frames/`` (one ``.npy`` per
-    frame and quantity: a long run never holds all its frames in memory) and a lock (a second
+    frame and quantity: a long run never holds all its frames in memory), the contact
+    recording so far in ``.log/`` (one file per recorded quantity) and a lock (a second
     run into the same folder is refused). When the run completes, the complete result replaces
     all of it (:func:`write_results`). A run that stops early (Ctrl-C, an error) leaves what it
     has, marks the summary incomplete and keeps the checkpoint, from which ``drumheat run ...
@@ -436,6 +440,16 @@ class RunFolder:
         """Where the run's particle frames are spooled while it runs
         (:class:`drumheat.motion.rows.RowSpool`)."""
         return self.out / FRAMES
+
+    @property
+    def log_dir(self) -> Path:
+        """Where the motion model's log keeps its large arrays while the run goes (made and
+        listed as drumheat's own when first asked for)."""
+        path = self.out / LOG
+        if not path.is_dir():
+            path.mkdir()
+            self._register()
+        return path
 
     # -- the end ------------------------------------------------------------------------------
     def complete(self, result, figures: bool = True, **figure_options) -> Path:

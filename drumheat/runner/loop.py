@@ -86,14 +86,15 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
     resume : dict, optional
         A checkpoint (:func:`drumheat.runner.checkpoint.load_checkpoint`) to continue from.
     """
+    spool = monitor.log_dir() if monitor is not None else None
     if resume is None:
         state = motion.initial_state(params)
-        log = motion.start_log(state, params)
+        log = motion.start_log(state, params, spool)
         rows = monitor.new_rows([]) if monitor is not None else []
         rows.append(jax.device_get(motion.observe(state)))
         i0 = 0
     else:
-        state, log, rows, i0 = restore(motion, resume, params)
+        state, log, rows, i0 = restore(motion, resume, params, spool)
         if monitor is not None:
             rows = monitor.new_rows(rows)
     if mesh is not None:
@@ -130,10 +131,12 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
     return (traj, state) if return_state else traj
 
 
-def restore(motion: AbstractMotion, checkpoint: dict, params=None):
-    """``(state, log, rows, next chunk)`` of a checkpoint, onto a fresh state of ``motion``."""
+def restore(motion: AbstractMotion, checkpoint: dict, params=None, spool=None):
+    """``(state, log, rows, next chunk)`` of a checkpoint, onto a fresh state of ``motion``;
+    ``spool``: the folder where the run that wrote it kept its log's large arrays
+    (:meth:`AbstractMotion.start_log`)."""
     template = motion.initial_state(params)
-    log = motion.load_log(checkpoint["log"], motion.start_log(template, params))
+    log = motion.load_log(checkpoint["log"], motion.start_log(template, params), spool)
     state, log = motion.restore_state(template, checkpoint["state"],
                                       checkpoint["meta"]["state"], log)
     return state, log, checkpoint["rows"], int(checkpoint["meta"]["chunk"])
@@ -210,6 +213,11 @@ class FolderMonitor:
 
     def wall_time(self) -> float:
         return time.perf_counter() - self.wall_start
+
+    def log_dir(self) -> Path:
+        """The folder where the motion model's log keeps its large arrays
+        (:meth:`AbstractMotion.start_log`; the contact recording of a DEM run)."""
+        return self.folder.log_dir
 
     def new_rows(self, rows: list) -> RowSpool:
         """The run's output rows, their particle frames in the folder's spool (a resumed run:
