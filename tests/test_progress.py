@@ -40,3 +40,23 @@ def test_replay_chunks_cost_less_than_dem_chunks():
     assert per_second_replay < 0.2 * per_second_dem
     # the whole run's work is the estimate's wall time
     np.testing.assert_allclose(w(60.0), cost["seconds"], rtol=0.05)
+
+
+def test_bar_says_when_the_run_switches_to_the_replay(monkeypatch):
+    """The switch to the cyclic replay (dem.replay_after) can take minutes at large N (the
+    restart assignment): the bar names it while it runs, and only then."""
+    scene = dh.load_scene("weigler-mixed", {"run.duration": 60.0, "run.output_interval": 2.5,
+                                            "dem.replay_after": 10.0})
+    motion = make_motion(scene)
+    notes = {float(t): motion.between_note(float(t)) for t in motion.times[1:]}
+    assert [t for t, note in notes.items() if note] == [10.0]
+    assert "replay" in notes[10.0] and f"{motion.n} particles" in notes[10.0]
+    err = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", err)
+    with SimProgress(60.0, True, delay=0.0) as bar:
+        bar.update_to(10.0)
+        bar.note(notes[10.0])
+        assert bar.bar.postfix == f"t = 10 / 60 s, {notes[10.0]}"
+        bar.update_to(12.5)
+        assert bar.bar.postfix == "t = 12.5 / 60 s"
+    assert notes[10.0] in err.getvalue()

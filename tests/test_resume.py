@@ -149,6 +149,22 @@ def test_recording_stays_in_the_folder_and_resumes(tmp_path, monkeypatch):
                 np.testing.assert_array_equal(a[key], b[key])
 
 
+def test_resume_without_the_recorded_files_says_so(tmp_path, monkeypatch):
+    """A checkpoint whose recording files were removed from the folder cannot be continued:
+    a CheckpointError that says so, not a traceback from deep inside."""
+    import shutil
+
+    scene = dem_scene(**{"dem.record_interval": 0.025})
+    out = tmp_path / "run"
+    with monkeypatch.context() as m:
+        kill_at(m, "dem", 3)
+        with pytest.raises(Killed):
+            dh.run(scene, out=out, progress=False)
+    shutil.rmtree(out / ".log")
+    with pytest.raises(CheckpointError, match="contacts.pair_i.bin.*start anew"):
+        dh.run(scene, out=out, progress=False, resume=True)
+
+
 def test_replay_resumes_bit_for_bit(tmp_path, monkeypatch):
     rec = dem_scene(**{"dem.record_interval": 0.01})
     dh.run(rec, out=tmp_path / "rec", progress=False)

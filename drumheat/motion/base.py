@@ -111,6 +111,11 @@ class AbstractMotion(abc.ABC):
         """Host-side work after the chunk ending at ``t``: ``(state, log)``."""
         return state, log
 
+    def between_note(self, t: float) -> str | None:
+        """What :meth:`between` does after the chunk ending at ``t`` when that takes a while
+        (the progress bar shows it meanwhile), else None."""
+        return None
+
     @abc.abstractmethod
     def observe(self, state) -> dict:
         """One output row: ``{"T": (N,) K, "Q": {account: J}, ...}`` (arrays)."""

@@ -346,9 +346,19 @@ class DEMBed(DEMMotion):
         if log["recorder"] is not None:
             ex = jax.device_get(state.extra)
             log["recorder"].add(np.asarray(state.nbrs.idx), ex, np.asarray(state.position))
-        if self.n_coupled < len(self.t_out) - 1 and abs(t - self.t_out[self.n_coupled]) < 1e-9:
+        if self._switches_at(t):
             state, log = self._switch_to_replay(state, log)
         return state, log
+
+    def _switches_at(self, t) -> bool:
+        """Whether the run goes over to the cyclic replay at ``t`` (``dem.replay_after``)."""
+        return self.n_coupled < len(self.t_out) - 1 and abs(t - self.t_out[self.n_coupled]) < 1e-9
+
+    def between_note(self, t):
+        if not self._switches_at(t):
+            return None
+        return (f"switching to the cyclic replay: the recorded networks and the restart "
+                f"assignment of {self.n} particles")
 
     def save_log(self, log) -> dict:
         rec = log["recorder"]

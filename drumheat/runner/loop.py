@@ -29,7 +29,7 @@ from drumheat.motion.rows import RowSpool
 from drumheat.motion.trajectory import Trajectory
 from drumheat.results.files import CHECKPOINT, RunFolder, check_out_dir
 from drumheat.results.result import Result, make_result
-from drumheat.runner.checkpoint import load_checkpoint, save_checkpoint
+from drumheat.runner.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from drumheat.runner.compile_cache import enable_compilation_cache
 from drumheat.runner.progress import SimProgress
 from drumheat.runner.sharding import make_mesh, resolve_devices, shard_particles
@@ -112,6 +112,9 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
                 new = advance_checked(motion, state, t0, t1)
                 if is_output[i + 1]:
                     rows.append(jax.device_get(motion.observe(new)))
+                note = motion.between_note(t1)
+                if note:
+                    bar.note(note)
                 new, log = motion.between(new, log, t1)
             except BaseException as err:
                 if monitor is not None:  # the last good state: before this chunk
@@ -136,7 +139,11 @@ def restore(motion: AbstractMotion, checkpoint: dict, params=None, spool=None):
     ``spool``: the folder where the run that wrote it kept its log's large arrays
     (:meth:`AbstractMotion.start_log`)."""
     template = motion.initial_state(params)
-    log = motion.load_log(checkpoint["log"], motion.start_log(template, params), spool)
+    try:
+        log = motion.load_log(checkpoint["log"], motion.start_log(template, params), spool)
+    except (ValueError, OSError) as err:  # e.g. the files a run kept in its folder are gone
+        raise CheckpointError(f"the checkpoint cannot be continued: {err}; start anew without "
+                              "--resume") from None
     state, log = motion.restore_state(template, checkpoint["state"],
                                       checkpoint["meta"]["state"], log)
     return state, log, checkpoint["rows"], int(checkpoint["meta"]["chunk"])

@@ -51,6 +51,12 @@ class SimProgress:
             self.bar.update(float(self.work(float(t))) - float(self.work(self._t)))
         self._t = float(t)
 
+    def note(self, text: str) -> None:
+        """Show ``text`` beside the simulated time until the next :meth:`update_to` (host work
+        between chunks that takes a while, e.g. the switch to a replay)."""
+        if self.bar is not None:
+            self.bar.set_postfix_str(f"{self._clock(self._t)}, {text}", refresh=True)
+
     def __exit__(self, *exc):
         if self.bar is not None:
             self.bar.close()
