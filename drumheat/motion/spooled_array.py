@@ -1,10 +1,9 @@
 """An array that grows by appended rows, in memory or in a file (:class:`SpooledArray`).
 
 The contact recording of a DEM run (``dem.record_interval``) grows by every recording
-interval: about 57 bytes per particle and interval in the built-in 3D drum, 14 kB per particle
-by the end of its 250 intervals, more than the mechanics' own working memory
-(docs/performance.md, "A whole run of the built-in drum"). A run that writes into a result
-folder keeps it in files there instead (``<out>/.log``), as it keeps its output frames
+interval; over a long run it outgrows the mechanics' own working memory (docs/performance.md,
+"A whole run of the built-in drum"). A run that writes into a result folder keeps it in files
+there instead (``<out>/.log``), as it keeps its output frames
 (:class:`drumheat.motion.rows.RowSpool`): each interval is appended to the files when it is
 recorded and read back memory-mapped, so a long run never holds its recording in memory,
 and its checkpoints name the recorded lengths instead of holding the arrays.
