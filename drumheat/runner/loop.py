@@ -139,8 +139,9 @@ def restore(motion: AbstractMotion, checkpoint: dict, params=None, spool=None):
     ``spool``: the folder where the run that wrote it kept its log's large arrays
     (:meth:`AbstractMotion.start_log`)."""
     template = motion.initial_state(params)
+    fresh = motion.start_log(template, params)
     try:
-        log = motion.load_log(checkpoint["log"], motion.start_log(template, params), spool)
+        log = motion.load_log(checkpoint["log"], fresh, spool)
     except (ValueError, OSError) as err:  # e.g. the files a run kept in its folder are gone
         raise CheckpointError(f"the checkpoint cannot be continued: {err}; start anew without "
                               "--resume") from None
