@@ -25,7 +25,6 @@ checked after every chunk (an overflow redoes it with larger buffers).
 
 from __future__ import annotations
 
-from functools import partial
 from pathlib import Path
 
 import equinox as eqx
@@ -85,7 +84,7 @@ class ContactRecorder:
                "positions": (np.float32, None)}
 
     def __init__(self, n, n_walls, interval, *, wall_heated, wall_ids, diameter, group,
-                 scene_toml: str, directory=None, lengths: dict | None = None):
+                 scene_toml: str, directory=None, lengths: dict | None = None, dim=None):
         self.n, self.n_walls, self.interval = n, n_walls, interval
         self.static = dict(wall_heated=wall_heated, wall_ids=wall_ids, diameter=diameter,
                            group=group, scene=scene_toml)
@@ -93,10 +92,11 @@ class ContactRecorder:
         self.directory = None if directory is None else Path(directory)
         if self.directory is not None:
             self.directory.mkdir(parents=True, exist_ok=True)
+        # lengths, dim: the rows of files a stopped run wrote and its positions' dimension
         lengths = lengths or {}
         self.columns = {key: SpooledArray(
-            dtype, (int(n), int(lengths["dim"])) if key == "positions" and "dim" in lengths
-            else row, None if self.directory is None else self.directory / f"contacts.{key}.bin",
+            dtype, (int(n), int(dim)) if key == "positions" and dim is not None else row,
+            None if self.directory is None else self.directory / f"contacts.{key}.bin",
             lengths.get(key, 0)) for key, (dtype, row) in self.COLUMNS.items()}
 
     def add(self, idx, extra, position):
@@ -135,12 +135,10 @@ class ContactRecorder:
         lengths = {k: (int(pp[-1]) if k.startswith("pair") else int(wp[-1])) for k in
                    cls.COLUMNS if k != "positions"}
         lengths["positions"] = len(pp)
-        if spooled:
-            lengths["dim"] = int(a["dim"])
         rec = cls(int(a["n_particles"]), int(a["n_walls"]), float(a["interval"]),
                   wall_heated=a["wall_heated"], wall_ids=a["wall_ids"], diameter=a["diameter"],
                   group=a["group"], scene_toml=str(a["scene"]), directory=directory,
-                  lengths=lengths if spooled else None)
+                  lengths=lengths if spooled else None, dim=a["dim"] if spooled else None)
         rec.pair_ptr, rec.wall_ptr = [int(x) for x in pp], [int(x) for x in wp]
         if not spooled:
             # checkpoints of earlier versions kept the positions in float64 as "positions_full"
@@ -173,20 +171,18 @@ class ContactRecorder:
                     dim=self.columns["positions"].row_shape[-1], **self.static)
 
     def save(self, path):
-        """Write ``contacts.npz``."""
-        save_recording(self.arrays(), path)
+        """Write ``contacts.npz`` (memory-mapped intervals are read in blocks as they are
+        compressed)."""
+        np.savez_compressed(path, **self.arrays())
 
     def saver(self):
         """:meth:`save` for a run's result (``Trajectory.files``). With a ``directory`` it
         writes the intervals mapped now: a mapping outlives its file, which goes when the
         complete result replaces the running folder."""
-        return self.save if self.directory is None else partial(save_recording, self.arrays())
-
-
-def save_recording(arrays: dict, path) -> None:
-    """Write the recording ``arrays`` (:meth:`ContactRecorder.arrays`) as ``contacts.npz``
-    (memory-mapped intervals are read in blocks as they are compressed)."""
-    np.savez_compressed(path, **arrays)
+        if self.directory is None:
+            return self.save
+        arrays = self.arrays()
+        return lambda path: np.savez_compressed(path, **arrays)
 
 
 @register

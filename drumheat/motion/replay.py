@@ -38,19 +38,17 @@ __all__ = ["Recording", "ReplayBed", "restart_assignment", "bisection_blocks", "
            "read_recording"]
 
 
-def _pad_rows(ptr, col, fill, divisor=None):
+def _pad_rows(ptr, col, fill):
     """The CSR column ``col`` (rows ``ptr[r]:ptr[r + 1]``) as a padded ``(rows, widest row)``
-    array of its own dtype, filled with ``fill``; divided by ``divisor`` if given. One column at a
-    time, so that a recording (possibly memory-mapped) is never held padded in several columns
-    at once beside the device arrays made of them."""
+    array of its own dtype, filled with ``fill``. One column at a time, so that a recording
+    (possibly memory-mapped) is never held padded in several columns at once beside the device
+    arrays made of them."""
     k = len(ptr) - 1
     width = max(1, int(np.max(np.diff(ptr))) if k else 1)
     out = np.full((k, width), fill, np.asarray(col[:0]).dtype)
     for r in range(k):
         a, b = ptr[r], ptr[r + 1]
         out[r, : b - a] = col[a:b]
-    if divisor is not None:
-        out /= divisor
     return out
 
 
@@ -153,11 +151,13 @@ class Recording:
         self.n_intervals = len(rec["pair_ptr"]) - 1
         self.n = int(rec["n_particles"])
         pp = rec["pair_ptr"]
-        # padding index n: ContactNetwork; weights: the contact-time fractions
+        w = _pad_rows(pp, np.asarray(rec["pair_duration"], float), 0.0)
+        w /= self.tau  # the contact-time fractions, in place
+        # padding index n: ContactNetwork
         self.pairs = (jnp.asarray(_pad_rows(pp, rec["pair_i"], self.n), jnp.int32),
                       jnp.asarray(_pad_rows(pp, rec["pair_j"], self.n), jnp.int32),
-                      jnp.asarray(_pad_rows(pp, np.asarray(rec["pair_duration"], float), 0.0,
-                                            self.tau), float))
+                      jnp.asarray(w, float))
+        del w
         heated = np.asarray(rec["wall_heated"], float)[rec["wall_index"]]
         # wall id of each contact (drums with internals book each surface separately)
         ids = (np.asarray(rec["wall_ids"], np.int32)[rec["wall_index"]] if "wall_ids" in rec
