@@ -250,11 +250,48 @@ def test_recording_from_an_interval_on_is_what_the_replay_keeps_of_it(tmp_path):
             whole = Recording(rec.arrays(), first=first)
             for r in (rec, restored):
                 cut = Recording(r.arrays(first=first))
-                for a, b in zip(jax.tree_util.tree_leaves((whole.pairs, whole.walls)),
-                                jax.tree_util.tree_leaves((cut.pairs, cut.walls))):
+                for a, b in zip(jax.tree_util.tree_leaves((whole.net.pairs, whole.net.walls)),
+                                jax.tree_util.tree_leaves((cut.net.pairs, cut.net.walls))):
                     np.testing.assert_array_equal(a, b)
                 np.testing.assert_array_equal(whole.positions, cut.positions)
                 np.testing.assert_array_equal(whole.match, cut.match)
+
+
+def test_replay_in_blocks_is_the_replay_of_the_whole_cycle(monkeypatch):
+    """Recording.networks(g, n) holds the rows of the whole cycle's networks at the cyclic
+    intervals g, g + 1, ... (across the cycle's end too), and Recording.replay, which puts a
+    block of intervals at a time on the device, gives the temperatures and accounts of the
+    whole cycle's replay bit for bit, restarts included, whatever the block (on a GPU to
+    round-off: its scatter-adds add in no fixed order)."""
+    import functools
+
+    from drumheat.motion import replay
+    from drumheat.motion.replay import Recording
+
+    n, k = 30, 5
+    recording = Recording(_random_recorder(np.random.default_rng(2), n, k).arrays())
+    whole = recording.net
+    for g, m in ((0, 5), (3, 4), (9, 7)):
+        block = recording.networks(g, m)
+        assert int(block.g0) == g
+        for a, b in zip(jax.tree_util.tree_leaves((whole.pairs, whole.walls)),
+                        jax.tree_util.tree_leaves((block.pairs, block.walls))):
+            np.testing.assert_array_equal(a[(g + np.arange(m)) % k], b)
+    model, T0 = make_motion(dem_scene()).model()
+    T0 = jnp.asarray(T0, float) + jnp.linspace(0.0, 40.0, n)  # unequal, so every contact flows
+    Q0 = {a: jnp.zeros(()) for a in model.accounts}
+    g = jnp.asarray(3, jnp.int64)
+    ref = whole.advance(model, T0, Q0, g, 12)  # two restarts, at g = 5 and g = 10
+    same = (np.testing.assert_array_equal if jax.default_backend() == "cpu"
+            else functools.partial(np.testing.assert_allclose, rtol=1e-12))
+    row = recording.pair_width * 16 + recording.wall_width * 16
+    for per_block in (1, 2, 5, 12):
+        monkeypatch.setattr(replay, "REPLAY_BLOCK_BYTES", per_block * row)
+        assert recording.block_intervals() == per_block
+        got = recording.replay(model, T0, Q0, g, 12)
+        for a, b in zip(jax.tree_util.tree_leaves(ref), jax.tree_util.tree_leaves(got)):
+            same(b, a)
+    assert not np.array_equal(ref[0], T0)
 
 
 def test_recording_in_files_is_the_recording_in_memory(tmp_path):

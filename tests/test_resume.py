@@ -15,12 +15,14 @@ import sys
 import time
 from pathlib import Path
 
+import equinox as eqx
+import jax
 import numpy as np
 import pandas as pd
 import pytest
 
 import drumheat as dh
-from drumheat.motion import MOTIONS
+from drumheat.motion import MOTIONS, make_motion
 from drumheat.runner.checkpoint import CheckpointError
 from drumheat.scene import load_scene, scene_from_dict
 
@@ -65,7 +67,10 @@ def dem_scene(**over):
     return scene.replace(over) if over else scene
 
 
-def kill_and_resume(scene, name, chunk, tmp_path, monkeypatch):
+def kill_and_resume(scene, name, chunk, tmp_path, monkeypatch, inspect=None):
+    """Kill a run into a folder after ``chunk`` chunks, resume it, and check that the result
+    equals a straight run's bit for bit; ``inspect(checkpoint path)`` is called before the
+    resume."""
     ref = dh.run(scene, progress=False)
     out = tmp_path / "run"
     with monkeypatch.context() as m:
@@ -79,6 +84,8 @@ def kill_and_resume(scene, name, chunk, tmp_path, monkeypatch):
     assert 1 <= len(partial) < len(ref.timeseries)
     np.testing.assert_allclose(partial["T_mean"], ref.timeseries["T_mean"][:len(partial)],
                                rtol=1e-9)  # the file holds 10 significant digits
+    if inspect is not None:
+        inspect(out / "checkpoint.npz")
     res = dh.run(scene, out=out, progress=False, resume=True)
     assert_identical(res, ref)
     assert json.loads((out / "summary.json").read_text())["complete"] is True
@@ -115,7 +122,25 @@ def test_coupled_dem_with_a_drum_wall_resumes_bit_for_bit(tmp_path, monkeypatch)
 def test_dem_with_replay_after_resumes_bit_for_bit(chunk, tmp_path, monkeypatch):
     scene = dem_scene(**{"run.duration": 0.4, "run.output_interval": 0.1,
                          "dem.record_interval": 0.05, "dem.replay_after": 0.2})
-    res = kill_and_resume(scene, "dem", chunk, tmp_path, monkeypatch)
+
+    phases = []
+
+    def replay_phase_holds_no_networks(path):
+        """A checkpoint of the replay phase holds the thermal model, the temperatures, the
+        accounts and the interval counter, not the recorded networks (the recording stays in
+        the folder's files)."""
+        with np.load(path) as ck:
+            meta = json.loads(str(ck["meta"]))
+        phases.append(meta["state"]["phase"])
+        if phases[-1] == "replay":
+            assert "Recording(2 intervals of 0.05 s, 30 particles)" in meta["state"]["structure"]
+            model = make_motion(scene).model()[0]
+            model_arrays = len(jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_array)))
+            assert meta["n_leaves"] == model_arrays + 1 + len(model.accounts) + 1  # T, Q, g
+
+    res = kill_and_resume(scene, "dem", chunk, tmp_path, monkeypatch,
+                          inspect=replay_phase_holds_no_networks)
+    assert phases == ["dem" if chunk == 3 else "replay"]
     assert (tmp_path / "run" / "contacts.npz").is_file()
     assert res.summary["energy_balance_rel_error"] < 1e-12
 

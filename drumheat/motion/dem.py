@@ -320,8 +320,9 @@ class DEMBed(DEMMotion):
 
     def advance(self, state, t0, t1):
         if isinstance(state, dict):  # the cyclic replay after dem.replay_after
-            n = self._steps(t0, t1, state["net"].tau)
-            T, Q, g = state["net"].advance(state["model"], state["T"], state["Q"], state["g"], n)
+            rec = state["recording"]
+            T, Q, g = rec.replay(state["model"], state["T"], state["Q"], state["g"],
+                                 self._steps(t0, t1, rec.tau))
             return dict(state, T=T, Q=Q, g=g)
         return self.dem.run_steps(self._start(state, t0), self._steps(t0, t1, self.dt))
 
@@ -386,8 +387,10 @@ class DEMBed(DEMMotion):
         model = eqx.combine(state.extra.model, self._skeleton)
         g0 = recording.n_intervals  # the first step restarts the cycle
         log = dict(log, recording=recording, g0=g0)
+        # the recording travels in the state as host data (no array leaves: a checkpoint holds
+        # T, Q and g only); each chunk puts its own intervals on the device
         return {"model": model, "T": state.extra.T, "Q": state.extra.Q,
-                "g": jnp.asarray(g0, jnp.int64), "net": recording.net}, log
+                "g": jnp.asarray(g0, jnp.int64), "recording": recording}, log
 
     def observe(self, state) -> dict:
         if isinstance(state, dict):

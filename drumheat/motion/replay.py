@@ -22,6 +22,8 @@ coupled run is measured by ``scripts/accuracy_cost.py``.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -38,18 +40,27 @@ __all__ = ["Recording", "ReplayBed", "restart_assignment", "bisection_blocks", "
            "read_recording"]
 
 
-def _pad_rows(ptr, col, fill):
-    """The CSR column ``col`` (rows ``ptr[r]:ptr[r + 1]``) as a padded ``(rows, widest row)``
-    array of its own dtype, filled with ``fill``. One column at a time, so that a recording
-    (possibly memory-mapped) is never held padded in several columns at once beside the device
-    arrays made of them."""
-    k = len(ptr) - 1
-    width = max(1, int(np.max(np.diff(ptr))) if k else 1)
-    out = np.full((k, width), fill, np.asarray(col[:0]).dtype)
-    for r in range(k):
-        a, b = ptr[r], ptr[r + 1]
-        out[r, : b - a] = col[a:b]
+def _pad_rows(ptr, row_values, fill, rows, width: int, dtype) -> np.ndarray:
+    """Rows ``rows`` of a CSR column (row r: positions ``ptr[r]:ptr[r + 1]``) as a padded
+    ``(len(rows), width)`` array of ``dtype`` filled with ``fill``; ``row_values(a, b)`` gives
+    the values of positions ``a:b`` (a slice of the column, or a quantity made of it). One
+    column and one row at a time, so that a recording (possibly memory-mapped) is never held
+    padded in several columns at once."""
+    out = np.full((len(rows), width), fill, dtype)
+    for s, r in enumerate(rows):
+        a, b = int(ptr[r]), int(ptr[r + 1])
+        out[s, : b - a] = row_values(a, b)
     return out
+
+
+def _widest(ptr) -> int:
+    """The most entries of one row of a CSR column (at least 1: a padded array is never empty)."""
+    return max(1, int(np.max(np.diff(ptr))) if len(ptr) > 1 else 1)
+
+
+#: bytes of recorded networks that :meth:`Recording.replay` puts on the device at once; a block
+#: of intervals of at most this size (at least one interval) per device call
+REPLAY_BLOCK_BYTES = 32 * 2**20
 
 
 #: largest group (particles) whose restart assignment is solved over all its particles at once;
@@ -125,16 +136,23 @@ def bisection_blocks(start, end, block: int) -> list:
 
 
 class Recording:
-    """A recorded contact network as padded device arrays (one row per recording interval).
+    """A recorded contact network: the recording's arrays on the host, and its intervals as
+    padded device arrays (one row per interval) where the replay needs them.
 
     Parameters
     ----------
-    first : int
-        First recorded interval to keep (the cycle is intervals ``first .. K-1``).
     rec : dict
         The arrays of ``contacts.npz`` (see :class:`drumheat.motion.dem.DEMBed`): ``interval``,
         ``n_particles``, ``pair_ptr/pair_i/pair_j/pair_duration``, ``wall_ptr/wall_particle/
         wall_index/wall_duration``, ``wall_heated``, ``positions`` (K + 1, N, dim), ``group``.
+        They are kept as given (memory maps stay memory maps).
+    first : int
+        First recorded interval to keep (the cycle is intervals ``first .. K-1``).
+
+    :attr:`net` puts the whole cycle on the device (the motion model ``replay``, whose variants
+    of an ensemble share it); :meth:`replay` puts a block of intervals at a time there (the
+    replay after ``dem.replay_after``, which then holds at most :data:`REPLAY_BLOCK_BYTES` of
+    networks instead of the cycle's). Both give the same rows, and so the same temperatures.
     """
 
     def __init__(self, rec: dict, first: int = 0):
@@ -150,33 +168,72 @@ class Recording:
         self.tau = float(rec["interval"])
         self.n_intervals = len(rec["pair_ptr"]) - 1
         self.n = int(rec["n_particles"])
-        pp = rec["pair_ptr"]
-        w = _pad_rows(pp, np.asarray(rec["pair_duration"], float), 0.0)
-        w /= self.tau  # the contact-time fractions, in place
-        # padding index n: ContactNetwork
-        self.pairs = (jnp.asarray(_pad_rows(pp, rec["pair_i"], self.n), jnp.int32),
-                      jnp.asarray(_pad_rows(pp, rec["pair_j"], self.n), jnp.int32),
-                      jnp.asarray(w, float))
-        del w
-        heated = np.asarray(rec["wall_heated"], float)[rec["wall_index"]]
+        self._rec = rec
+        self._heated = np.asarray(rec["wall_heated"], float)
         # wall id of each contact (drums with internals book each surface separately)
-        ids = (np.asarray(rec["wall_ids"], np.int32)[rec["wall_index"]] if "wall_ids" in rec
-               else np.zeros(len(rec["wall_index"]), np.int32))
-        wp = rec["wall_ptr"]
-        self.walls = (jnp.asarray(_pad_rows(wp, rec["wall_particle"], 0), jnp.int32),
-                      jnp.asarray(_pad_rows(wp, rec["wall_duration"] / self.tau * heated, 0.0),
-                                  float),
-                      jnp.asarray(_pad_rows(wp, ids, 0), jnp.int32))
+        self._wall_ids = (np.asarray(rec["wall_ids"], np.int32) if "wall_ids" in rec
+                          else np.zeros(len(self._heated), np.int32))
+        self.pair_width, self.wall_width = _widest(rec["pair_ptr"]), _widest(rec["wall_ptr"])
         # as recorded (float32; memory-mapped from a run's result folder): 12 instead of 24
         # bytes per particle and interval; restart_assignment and position_at work in float64
         self.positions = np.asarray(rec["positions"])
         self.span = self.tau * self.n_intervals
         self.mean_pairs = float(np.sum(rec["pair_duration"])) / self.span
-        self.mean_wall = float(np.sum(rec["wall_duration"] * heated)) / self.span
+        self.mean_wall = float(np.sum(rec["wall_duration"] * self._heated[rec["wall_index"]])
+                               ) / self.span
         self.match = restart_assignment(self.positions[-1], self.positions[0],
                                         np.asarray(rec["group"]))
-        self.net = RecordedNetwork(self.pairs, self.walls, jnp.asarray(self.match), self.tau,
-                                   self.n_intervals)
+        self._match = jnp.asarray(self.match)
+
+    def __repr__(self) -> str:  # stable: it is part of a replay state's structure
+        return f"Recording({self.n_intervals} intervals of {self.tau:g} s, {self.n} particles)"
+
+    @functools.cached_property
+    def net(self) -> RecordedNetwork:
+        """The whole cycle's networks on the device (built at the first use, then kept)."""
+        return self.networks(0, self.n_intervals)
+
+    def networks(self, g, n: int) -> RecordedNetwork:
+        """The networks of the ``n`` cyclic intervals from counter ``g`` (rows ``(g + s) mod K``,
+        each padded to the cycle's widest interval, so every block has the same row layout)."""
+        rec, tau = self._rec, self.tau
+        rows = (int(g) + np.arange(int(n))) % self.n_intervals
+        pp, wp = rec["pair_ptr"], rec["wall_ptr"]
+        pi, pj, pd = rec["pair_i"], rec["pair_j"], rec["pair_duration"]
+        wpart, wi, wd = rec["wall_particle"], rec["wall_index"], rec["wall_duration"]
+        pad = functools.partial(_pad_rows, rows=rows)
+        # padding index n: ContactNetwork; weights: the contact-time fractions
+        pairs = (jnp.asarray(pad(pp, lambda a, b: pi[a:b], self.n, width=self.pair_width,
+                                 dtype=np.int32)),
+                 jnp.asarray(pad(pp, lambda a, b: pj[a:b], self.n, width=self.pair_width,
+                                 dtype=np.int32)),
+                 jnp.asarray(pad(pp, lambda a, b: np.asarray(pd[a:b], float) / tau, 0.0,
+                                 width=self.pair_width, dtype=float)))
+        walls = (jnp.asarray(pad(wp, lambda a, b: wpart[a:b], 0, width=self.wall_width,
+                                 dtype=np.int32)),
+                 jnp.asarray(pad(wp, lambda a, b: wd[a:b] / tau * self._heated[wi[a:b]], 0.0,
+                                 width=self.wall_width, dtype=float)),
+                 jnp.asarray(pad(wp, lambda a, b: self._wall_ids[wi[a:b]], 0,
+                                 width=self.wall_width, dtype=np.int32)))
+        return RecordedNetwork(pairs, walls, self._match, jnp.asarray(int(g), jnp.int64),
+                               tau, self.n_intervals)
+
+    def block_intervals(self) -> int:
+        """Intervals per device call of :meth:`replay`: as many as fit in
+        :data:`REPLAY_BLOCK_BYTES` (at least one)."""
+        row = self.pair_width * (4 + 4 + 8) + self.wall_width * (4 + 8 + 4)
+        return max(1, REPLAY_BLOCK_BYTES // row)
+
+    def replay(self, model, T, Q, g, n_steps: int):
+        """:meth:`RecordedNetwork.advance` over ``n_steps`` intervals from the counter ``g``,
+        with the networks put on the device a block of :meth:`block_intervals` at a time
+        (``g`` is read on the host once)."""
+        g_host, done, block = int(g), 0, self.block_intervals()
+        while done < n_steps:
+            k = min(block, n_steps - done)
+            T, Q, g = self.networks(g_host + done, k).advance(model, T, Q, g, k)
+            done += k
+        return T, Q, g
 
     def network(self, k) -> ContactNetwork:
         """Contact network of interval ``k`` (weights = contact-time fractions)."""
@@ -187,30 +244,38 @@ class Recording:
         return np.asarray(self.positions[g % self.n_intervals], float)
 
 
-class RecordedNetwork(eqx.Module):
-    """The device part of a :class:`Recording`: the padded per-interval networks and the
-    restart assignment, with the replay step (a PyTree, so it can travel in a run's state).
+# a Recording in a replay state is host data, not array leaves: a node without children, its
+# repr part of the state's structure (checkpoints compare it)
+jax.tree_util.register_static(Recording)
 
-    pairs: (i, j, weight) arrays (K, P); walls: (particle, weight, wall id) arrays (K, W);
-    match: (N,) restart assignment; tau: recording interval, s; n_intervals: K.
+
+class RecordedNetwork(eqx.Module):
+    """Recorded networks on the device: rows of padded per-interval networks and the restart
+    assignment, with the replay step (a PyTree).
+
+    pairs: (i, j, weight) arrays (R, P); walls: (particle, weight, wall id) arrays (R, W);
+    match: (N,) restart assignment; g0: the cyclic interval counter of row 0 (the rows are the
+    intervals ``g0, g0 + 1, ...`` modulo K, R of them); tau: recording interval, s;
+    n_intervals: K, the cycle's intervals.
     """
 
     pairs: tuple
     walls: tuple
     match: jax.Array
+    g0: jax.Array
     tau: float = eqx.field(static=True)
     n_intervals: int = eqx.field(static=True)
 
     def network(self, k) -> ContactNetwork:
-        """Contact network of interval ``k`` (weights = contact-time fractions)."""
+        """Contact network of row ``k`` (weights = contact-time fractions)."""
         i, j, w = (a[k] for a in self.pairs)
         wp, ww, wid = (a[k] for a in self.walls)
         return ContactNetwork(i, j, w, wp, wid, ww)
 
     def advance(self, model, T, Q, g, n_steps: int):
         """``n_steps`` explicit steps of one recording interval each from the cyclic interval
-        counter ``g``: ``(T, Q, g)`` after them. A step whose counter is a positive multiple
-        of the number of intervals first carries the temperatures over to the restart
+        counter ``g`` (rows ``g - g0`` on, modulo R): ``(T, Q, g)`` after them. A step whose
+        counter is a positive multiple of K first carries the temperatures over to the restart
         positions (:func:`restart_assignment`)."""
         return _replay_steps(self, model, T, Q, g, int(n_steps))
 
@@ -218,13 +283,12 @@ class RecordedNetwork(eqx.Module):
 @eqx.filter_jit
 def _replay_steps(net: RecordedNetwork, model, T, Q, g, n_steps):
     C = model.particles.capacity
-    K, tau = net.n_intervals, net.tau
+    K, tau, rows = net.n_intervals, net.tau, net.pairs[0].shape[0]
 
     def step(carry, _):
         T, Q, g = carry
-        k = g % K
-        T = jnp.where((k == 0) & (g > 0), T[net.match], T)
-        q, ext = model.heat_flows(T, net.network(k))
+        T = jnp.where((g % K == 0) & (g > 0), T[net.match], T)
+        q, ext = model.heat_flows(T, net.network((g - net.g0) % rows))
         return (T + tau * q / C, {a: Q[a] + tau * ext[a] for a in Q}, g + 1), None
 
     return jax.lax.scan(step, (T, Q, g), None, length=n_steps)[0]
