@@ -150,9 +150,10 @@ class Recording:
         First recorded interval to keep (the cycle is intervals ``first .. K-1``).
 
     :attr:`net` puts the whole cycle on the device (the motion model ``replay``, whose variants
-    of an ensemble share it); :meth:`replay` puts a block of intervals at a time there (the
-    replay after ``dem.replay_after``, which then holds at most :data:`REPLAY_BLOCK_BYTES` of
-    networks instead of the cycle's). Both give the same rows, and so the same temperatures.
+    of an ensemble share it); :meth:`replay` (the replay after ``dem.replay_after``) does so
+    too where the cycle fits in :data:`REPLAY_BLOCK_BYTES`, and else puts a block of intervals
+    at a time there, so that it holds at most that much of networks instead of the cycle's.
+    Both give the same rows, and so the same temperatures.
     """
 
     def __init__(self, rec: dict, first: int = 0):
@@ -225,10 +226,14 @@ class Recording:
         return max(1, REPLAY_BLOCK_BYTES // row)
 
     def replay(self, model, T, Q, g, n_steps: int):
-        """:meth:`RecordedNetwork.advance` over ``n_steps`` intervals from the counter ``g``,
-        with the networks put on the device a block of :meth:`block_intervals` at a time
-        (``g`` is read on the host once)."""
-        g_host, done, block = int(g), 0, self.block_intervals()
+        """:meth:`RecordedNetwork.advance` over ``n_steps`` intervals from the counter ``g``:
+        on the whole cycle (:attr:`net`, put on the device once) if it fits in
+        :data:`REPLAY_BLOCK_BYTES`, else with the networks put on the device a block of
+        :meth:`block_intervals` at a time (``g`` is then read on the host once)."""
+        block = self.block_intervals()
+        if self.n_intervals <= block:  # a small bed: no padding on the host per chunk
+            return self.net.advance(model, T, Q, g, n_steps)
+        g_host, done = int(g), 0
         while done < n_steps:
             k = min(block, n_steps - done)
             T, Q, g = self.networks(g_host + done, k).advance(model, T, Q, g, k)
