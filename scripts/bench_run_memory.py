@@ -2,8 +2,9 @@
 
 ``bench_memory.py`` measures the DEM chunk alone; a user's run holds more: the set-up, the
 contact recording of ``dem.record_interval`` (it grows with the recorded time), the switch to the
-cyclic replay at ``dem.replay_after`` (the recording turned into padded networks and the restart
-assignment), the replay and the result files. For each N this runs the built-in scene
+cyclic replay at ``dem.replay_after`` (the restart assignment), the replay (the recorded
+networks on the device: the whole cycle where it fits in ``REPLAY_BLOCK_BYTES``, else a block
+of intervals at a time) and the result files. For each N this runs the built-in scene
 ``glass-drum-3d`` (its knob: depth = N x 2.6e-5 m) from a packing file, shortened to
 ``--duration`` with the replay after ``--replay-after`` (cycle: half of it), in a fresh process,
 with a thread that attributes the resident memory's high-water mark (``VmHWM``, reset through
@@ -49,7 +50,7 @@ from bench_memory import proc_status  # noqa: E402
 PHASES = (("write_results", "result files"), ("complete", "result files"),
           ("_switch_to_replay", "switch to replay"), ("between", "recording"),
           ("finish", "trajectory"), ("make_result", "trajectory"),
-          ("advance_checked", "steps"), ("estimate", "estimate"),
+          ("replay", "replay"), ("advance_checked", "steps"), ("estimate", "estimate"),
           ("make_motion", "set-up"), ("initial_state", "set-up"))
 
 
@@ -131,8 +132,8 @@ def main():
           f"{rec}, {'no result folder' if args.no_folder else 'into a result folder'}: the "
           "resident memory's peak in each phase above the resident memory before the run "
           "(imports), MB; last rows: the slope between successive N, kB per particle")
-    order = ["set-up", "estimate", "steps", "recording", "switch to replay", "trajectory",
-             "result files"]
+    order = ["set-up", "estimate", "steps", "recording", "switch to replay", "replay",
+             "trajectory", "result files"]
     print("| N | " + " | ".join(order) + " | whole run | before the run (MB) |")
     print("|---|" + "---|" * (len(order) + 2))
     rows, anon_rows = [], []

@@ -260,9 +260,9 @@ def test_recording_from_an_interval_on_is_what_the_replay_keeps_of_it(tmp_path):
 def test_replay_in_blocks_is_the_replay_of_the_whole_cycle(monkeypatch):
     """Recording.networks(g, n) holds the rows of the whole cycle's networks at the cyclic
     intervals g, g + 1, ... (across the cycle's end too), and Recording.replay, which puts a
-    block of intervals at a time on the device, gives the temperatures and accounts of the
-    whole cycle's replay bit for bit, restarts included, whatever the block (on a GPU to
-    round-off: its scatter-adds add in no fixed order)."""
+    block of intervals at a time on the device (the whole cycle where it fits), gives the
+    temperatures and accounts of the whole cycle's replay bit for bit, restarts included,
+    whatever the block (on a GPU to round-off: its scatter-adds add in no fixed order)."""
     import functools
 
     from drumheat.motion import replay

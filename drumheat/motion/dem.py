@@ -16,7 +16,10 @@ With ``[dem] record_interval`` the run also records its contact network: for eve
 interval the touching pairs and wall contacts with their contact durations (``contacts.npz``),
 which motion model ``replay`` integrates without mechanics (Weigler's decoupled method,
 section 6.1, without its dense-matrix size limit). With ``[dem] replay_after`` the run switches
-from mechanics to the cyclic replay of its own recording after that time.
+from mechanics to the cyclic replay of its own recording after that time; the state is then
+``{"model", "T", "Q", "g", "recording"}``, the :class:`~drumheat.motion.replay.Recording` staying
+on the host (the result folder's files, or memory) and each chunk putting the networks of its
+intervals on the device (:meth:`~drumheat.motion.replay.Recording.replay`).
 
 The run loop's chunks are the recording intervals while the mechanics run (the recording is
 taken between them, on the host) and the output intervals otherwise; the neighbour lists are
