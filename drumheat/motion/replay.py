@@ -139,6 +139,12 @@ class Recording:
     """A recorded contact network: the recording's arrays on the host, and its intervals as
     padded device arrays (one row per interval) where the replay needs them.
 
+    :attr:`net` puts the whole cycle on the device (the motion model ``replay``, whose variants
+    of an ensemble share it); :meth:`replay` (the replay after ``dem.replay_after``) does so
+    too where the cycle fits in :data:`REPLAY_BLOCK_BYTES`, and else puts a block of intervals
+    at a time there, so that it holds at most that much of networks instead of the cycle's.
+    Both give the same rows, and so the same temperatures.
+
     Parameters
     ----------
     rec : dict
@@ -148,12 +154,6 @@ class Recording:
         They are kept as given (memory maps stay memory maps).
     first : int
         First recorded interval to keep (the cycle is intervals ``first .. K-1``).
-
-    :attr:`net` puts the whole cycle on the device (the motion model ``replay``, whose variants
-    of an ensemble share it); :meth:`replay` (the replay after ``dem.replay_after``) does so
-    too where the cycle fits in :data:`REPLAY_BLOCK_BYTES`, and else puts a block of intervals
-    at a time there, so that it holds at most that much of networks instead of the cycle's.
-    Both give the same rows, and so the same temperatures.
     """
 
     def __init__(self, rec: dict, first: int = 0):
