@@ -357,8 +357,7 @@ class DEMBed(DEMMotion):
     def between_note(self, t):
         if not self._switches_at(t):
             return None
-        return (f"switching to the cyclic replay: the recorded networks and the restart "
-                f"assignment of {self.n} particles")
+        return f"switching to the cyclic replay: the restart assignment of {self.n} particles"
 
     def save_log(self, log) -> dict:
         rec = log["recorder"]
