@@ -11,9 +11,13 @@ neighbours lie decides how often that misses the cache. Two measurements:
   1000 steps (particle-steps/s).
 * ``--revolutions R``: the poured bed run for R drum revolutions in chunks of ``--chunk``
   steps, printing each chunk's rate and the median |i - j| as the turning bed mixes.
+* ``--frame FILE:K``: the first measurement on the positions of output K of a run's
+  ``particles.npz`` instead of the pour (a bed numbered as a long run has mixed it; given to the
+  scene as a packing, at rest), to tell what a renumbering would gain at that point of a run.
 
 Usage: python scripts/bench_particle_order.py [--n 10000] [--orders asis random morton]
        python scripts/bench_particle_order.py --n 10000 --revolutions 1.2 [--chunk 20000]
+       python scripts/bench_particle_order.py --n 10000 --frame results/drum/particles.npz:25
 The packings are cached in ``--packing-cache`` (bench_vs_liggghts.py's).
 """
 
@@ -57,9 +61,22 @@ def motion_for(n, packing):
     return make_motion(scene_for(n, "cpu", packing))
 
 
-def orders(n, names, cache):
-    with np.load(scene_packing(n, cache)) as f:
-        pos = f["position"]
+def frame_positions(spec: str, n: int) -> np.ndarray:
+    """The positions of output K of a ``particles.npz`` (``spec`` = ``FILE:K``)."""
+    path, k = spec.rsplit(":", 1)
+    with np.load(path) as f:
+        pos = np.asarray(f["position"][int(k)], float)
+    if len(pos) != n:
+        raise SystemExit(f"{path} holds {len(pos)} particles, not --n {n}")
+    return pos
+
+
+def orders(n, names, cache, frame=None):
+    if frame is None:
+        with np.load(scene_packing(n, cache)) as f:
+            pos = f["position"]
+    else:
+        pos = frame_positions(frame, n)
     perms = {"asis": np.arange(n), "random": np.random.default_rng(0).permutation(n),
              "morton": morton_order(pos)}
     tmp = Path(tempfile.mkdtemp())
@@ -104,11 +121,12 @@ def main():
     ap.add_argument("--revolutions", type=float, default=0.0)
     ap.add_argument("--chunk", type=int, default=20000)
     ap.add_argument("--packing-cache", default="/tmp/drumheat_packings")
+    ap.add_argument("--frame", metavar="FILE:K", help="start from output K of a particles.npz")
     args = ap.parse_args()
     if args.revolutions > 0:
         revolutions(args.n, args.revolutions, args.chunk, args.packing_cache)
     else:
-        orders(args.n, args.orders, args.packing_cache)
+        orders(args.n, args.orders, args.packing_cache, args.frame)
 
 
 if __name__ == "__main__":
