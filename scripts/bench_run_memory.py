@@ -132,10 +132,7 @@ def main():
           f"{rec}, {'no result folder' if args.no_folder else 'into a result folder'}: the "
           "resident memory's peak in each phase above the resident memory before the run "
           "(imports), MB; last rows: the slope between successive N, kB per particle")
-    order = ["set-up", "estimate", "steps", "recording", "switch to replay", "replay",
-             "trajectory", "result files"]
-    print("| N | " + " | ".join(order) + " | whole run | before the run (MB) |")
-    print("|---|" + "---|" * (len(order) + 2))
+    header()
     rows, anon_rows = [], []
     for n in args.n:
         env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="1048576")
@@ -152,22 +149,36 @@ def main():
             print(f"| {n} | failed (exit {out.returncode}): {out.stderr.strip()[-300:]} |")
             continue
         d = json.loads(out.stdout.strip().splitlines()[-1])
-        added = [d["peaks"].get(p, float("nan")) - d["base_mb"] for p in order]
+        added = [d["peaks"].get(p, float("nan")) - d["base_mb"] for p in ORDER]
         added.append(max(d["peaks"].values()) - d["base_mb"])
         rows.append((n, added))
-        anon_rows.append((n, [d["anon"].get(p, float("nan")) - d["base_anon_mb"] for p in order]
+        anon_rows.append((n, [d["anon"].get(p, float("nan")) - d["base_anon_mb"] for p in ORDER]
                           + [max(d["anon"].values()) - d["base_anon_mb"]], d["base_anon_mb"]))
-        print(f"| {n} | " + " | ".join(f"{a:.0f}" for a in added) + f" | {d['base_mb']:.0f} |",
-              flush=True)
+        row(n, added, d["base_mb"])
     slopes(rows)
     print("\nThe anonymous resident memory (RssAnon: what the process allocated, without the "
           "pages of mapped files, which the system can drop), sampled every 50 ms, the same "
           "columns:")
-    print("| N | " + " | ".join(order) + " | whole run | before the run (MB) |")
-    print("|---|" + "---|" * (len(order) + 2))
+    header()
     for n, added, base in anon_rows:
-        print(f"| {n} | " + " | ".join(f"{a:.0f}" for a in added) + f" | {base:.0f} |")
+        row(n, added, base)
     slopes([r[:2] for r in anon_rows])
+
+
+#: the phases in the tables' order
+ORDER = ["set-up", "estimate", "steps", "recording", "switch to replay", "replay", "trajectory",
+         "result files"]
+
+
+def header():
+    """Print a table's header: the phases, the whole run, the memory before the run."""
+    print("| N | " + " | ".join(ORDER) + " | whole run | before the run (MB) |")
+    print("|---|" + "---|" * (len(ORDER) + 2))
+
+
+def row(n, added, base):
+    """Print one N's row: the peak of each phase and of the whole run above ``base``, MB."""
+    print(f"| {n} | " + " | ".join(f"{a:.0f}" for a in added) + f" | {base:.0f} |", flush=True)
 
 
 def slopes(rows):

@@ -154,7 +154,7 @@ class ContactRecorder:
         """The recording as arrays (the content of ``contacts.npz``); with ``first``, only
         intervals ``first`` to the last, as :class:`~drumheat.motion.replay.Recording` keeps
         them (pointers and positions from that interval on). The recorded intervals come as
-        read-only memory maps of the files of a recorder with a ``directory``, else as copies."""
+        read-only memory maps of the files of a recorder with a ``directory``, else from memory."""
         pp, wp = (np.asarray(ptr[first:], np.int64) for ptr in (self.pair_ptr, self.wall_ptr))
         start = {k: (pp[0] if k.startswith("pair") else wp[0]) for k in self.COLUMNS}
         start["positions"] = first
@@ -328,7 +328,6 @@ class DEMBed(DEMMotion):
                                  self._steps(t0, t1, rec.tau))
             return dict(state, T=T, Q=Q, g=g)
         return self.dem.run_steps(self._start(state, t0), self._steps(t0, t1, self.dt))
-
 
     def start_log(self, state, params=None, spool=None):
         rec = None

@@ -443,13 +443,10 @@ class RunFolder:
 
     @property
     def log_dir(self) -> Path:
-        """Where the motion model's log keeps its large arrays while the run goes (made and
-        listed as drumheat's own when first asked for)."""
-        path = self.out / LOG
-        if not path.is_dir():
-            path.mkdir()
-            self._register()
-        return path
+        """Where the motion model's log keeps its large arrays while the run goes (made by the
+        log that uses it, e.g. :class:`drumheat.motion.dem.ContactRecorder`, before the first
+        output row lists the folder's entries as drumheat's own)."""
+        return self.out / LOG
 
     # -- the end ------------------------------------------------------------------------------
     def complete(self, result, figures: bool = True, **figure_options) -> Path:
