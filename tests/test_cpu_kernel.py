@@ -27,7 +27,7 @@ R_P = 0.002  # particle radius (m)
 
 
 def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling=True,
-         rotation=True, calm=False, friction_heat=None):
+         rotation=True, calm=False, friction_heat=None, shuffle=False):
     """A small moving bed of two materials with rolling resistance in the lower half of an
     annulus between a rotating drum shell and a counter-rotating inner cylinder (2D, or a 3D
     slice with periodic z): spheres of 0.97-1 r on a 1.97 r lattice, jittered, so that many
@@ -37,7 +37,8 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     touches nothing yet (gaps up to 1e-4 d), moving slowly, no springs, set in motion by
     gravity (50 g) and the walls. Returns the DEM and a state (None for kernel "cpu": the
     state of the "jax" twin serves both). ``friction_heat``: make_dem's (a FrictionHeat, or a
-    function of the particles that gives one)."""
+    function of the particles that gives one). ``shuffle``: the particles numbered at random
+    (else along the lattice, so that neighbours lie near each other in the numbering)."""
     rng = np.random.default_rng(seed)
     R, r_in = 0.03, 0.008
     a = (2.0 if calm else 1.97) * R_P
@@ -60,6 +61,8 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
         keep[k] = not np.any(near)
     pts = pts[keep]
     n = len(pts)
+    if shuffle:
+        pts = pts[rng.permutation(n)]
     radius = R_P * rng.uniform(0.9999 if calm else 0.97, 1.0, n)
     ptype = rng.integers(0, 2, n)
     part = make_particles(radius, np.where(ptype == 0, 2500.0, 2700.0), ptype=ptype)
@@ -196,6 +199,8 @@ def _run_both(dim, dtype, steps):
     st = cdem.run(st, 5000, chunk=5000)
     a = jdem.run(st, steps, chunk=steps)
     b = cdem.run(st, steps, chunk=steps)
+    assert b.nbrs.order is not None and a.nbrs.order is None  # the C++ loop's lists: cell order
+    b = jdem.adopt(b)  # its pairs in canonical order, the springs with them: slot for slot
     assert int(a.n_rebuilds) > int(st.n_rebuilds)  # history carried through neighbour rebuilds
     # touching pairs and wall contacts: those with a spring (zero where nothing touches)
     assert int(jnp.sum(jnp.any(a.pair_spring != 0, -1))) > (50 if dim == 2 else 200)  # a bed
@@ -273,6 +278,66 @@ def test_any_order_of_the_pair_slots(monkeypatch):
         _close(a[0], b[0], REL[jnp.float64], "force")
         _close(a[1], b[1], REL[jnp.float64], "torque")
         _close(a[6], b[6], REL[jnp.float64], "heat flow")
+
+
+@needs_kernel
+@pytest.mark.parametrize("dim,dtype", [(3, jnp.float64), (2, jnp.float32)])
+def test_the_cell_order(monkeypatch, dim, dtype):
+    """The C++ loop's lists are in the cell order (``NeighborList.order``; the pairs grouped by
+    their first particle in it) and the loop lays the particles' data out in that order. Given
+    the same list without the order (the particles' own numbering), every output is the same
+    bit for bit in one chunk (each sum takes the same terms in the same order) and to round-off
+    in three; against the canonical list of the same pairs the per-pair outputs are the same
+    pair for pair and the sums agree to round-off. An order that is not a permutation is
+    refused."""
+    import dataclasses
+
+    from drumheat.mechanics.integrator import _carry_pairs
+    from drumheat.mechanics.neighbors import sort_pairs
+
+    # numbered along the lattice, the numbering will do (canonical list, order 0 .. N-1)
+    st = _bed(dim, dtype, "jax", "overlap", 0.05)[1]
+    cs = _bed(dim, dtype, "cpu", "overlap", 0.05)[0].adopt(st)
+    np.testing.assert_array_equal(np.asarray(cs.nbrs.order), np.arange(st.position.shape[0]))
+    np.testing.assert_array_equal(np.asarray(cs.nbrs.idx), np.asarray(st.nbrs.idx))
+    # numbered at random: the same pairs and springs in the cell order (which a bed this small,
+    # whose data all fit in the cache, does not get from layout_order: made here)
+    jdem, st = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=True)
+    cdem = _bed(dim, dtype, "cpu", "overlap", 0.05, shuffle=True)[0]
+    n = st.position.shape[0]
+    cells = cdem.neighbor.grid.order(st.nbrs.reference_position)
+    cs = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+    assert st.nbrs.order is None
+    order = np.asarray(cs.nbrs.order)
+    assert not np.array_equal(order, np.arange(n))  # the bed's numbering is not its cells
+    rank = np.empty(n, int)
+    rank[order] = np.arange(n)
+    i = np.asarray(cs.nbrs.idx[0])
+    assert np.all(np.diff(np.where(i < n, rank[np.minimum(i, n - 1)], n)) >= 0)  # grouped
+    plain = cs._replace(nbrs=dataclasses.replace(cs.nbrs, order=None))
+    ref = _forces(cdem, st)
+    for threads in ("1", "3"):
+        monkeypatch.setenv("DRUMHEAT_KERNEL_THREADS", threads)
+        a, b = _forces(cdem, cs), _forces(cdem, plain)
+        sums = (0, 1, 6) if threads == "3" else ()  # force, torque, heat: round-off in chunks
+        for k in sums:
+            _close(a[k], b[k], REL[jnp.float64 if k == 6 else dtype], "sums in three chunks")
+        rest = lambda r: [x for k, x in enumerate(r) if k not in sums]  # noqa: E731
+        for x, y in zip(jax.tree_util.tree_leaves(rest(a)), jax.tree_util.tree_leaves(rest(b))):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        # against the canonical list: the same pairs' springs and overlaps, pair for pair
+        back = jdem.adopt(cs._replace(pair_spring=a[2]))
+        np.testing.assert_array_equal(np.asarray(back.nbrs.idx), np.asarray(st.nbrs.idx))
+        np.testing.assert_array_equal(np.asarray(back.pair_spring), np.asarray(ref[2]))
+        np.testing.assert_array_equal(np.asarray(a[3]), np.asarray(ref[3]))  # wall springs
+        _close(a[0], ref[0], REL[dtype], "force")
+        _close(a[1], ref[1], REL[dtype], "torque")
+        _close(a[6], ref[6], REL[jnp.float64], "heat flow")
+    bad = order.copy()
+    bad[0] = bad[1]
+    with pytest.raises(Exception, match="not a permutation"):
+        bad_state = cs._replace(nbrs=dataclasses.replace(cs.nbrs, order=jnp.asarray(bad)))
+        jax.block_until_ready(_forces(cdem, bad_state))
 
 
 def test_gap_tolerance_of_the_jax_heat_flow():

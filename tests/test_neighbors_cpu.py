@@ -18,28 +18,33 @@ pytestmark = [pytest.mark.skipif(not cpu_kernel.available()[0],
               pytest.mark.filterwarnings("ignore::drumheat.mechanics.DEMAccuracyWarning")]
 
 
-def _setups(dim, periodic, lo, hi, cutoff=0.02):
-    return [make_neighbor_setup(dim, lo, hi, cutoff, 0.004, periodic, builder=b)
-            for b in ("jax", "cpu")]
+def _setups(dim, periodic, lo, hi, cutoff=0.02, pair_order="index"):
+    return [make_neighbor_setup(dim, lo, hi, cutoff, 0.004, periodic, builder=b,
+                                pair_order=pair_order) for b in ("jax", "cpu")]
 
 
 def _both(setups, pos, nbrs):
     return [jax.jit(s.rebuild_with_sources)(pos, nbrs) for s in setups]
 
 
-@pytest.mark.parametrize("dim,periodic,dtype,spread", [
-    (2, None, np.float32, 1.0), (3, None, np.float64, 1.0), (3, 0.12, np.float32, 1.0),
-    (3, 0.12, np.float64, 1.0), (3, None, np.float64, 1.6), (2, None, np.float64, 1.6)])
-def test_same_pairs_order_and_sources(dim, periodic, dtype, spread):
+@pytest.mark.parametrize("dim,periodic,dtype,spread,pair_order", [
+    (2, None, np.float32, 1.0, "index"), (3, None, np.float64, 1.0, "index"),
+    (3, 0.12, np.float32, 1.0, "index"), (3, 0.12, np.float64, 1.0, "index"),
+    (3, None, np.float64, 1.6, "index"), (2, None, np.float64, 1.6, "index"),
+    (2, None, np.float32, 1.0, "cell"), (3, 0.12, np.float64, 1.0, "cell"),
+    (3, None, np.float64, 1.6, "cell")])
+def test_same_pairs_order_and_sources(dim, periodic, dtype, spread, pair_order):
     """Random particles (``spread`` > 1: some outside the box, clipped into its edge cells),
-    rebuilt after a move: pairs, order, the old slot of every pair, flags, all equal."""
+    rebuilt after a move: pairs, order, the old slot of every pair, flags, all equal; in the
+    canonical order (by (i, j)) or the cell order (grouped by i in the order of the particles'
+    cells, j ascending)."""
     rng = np.random.default_rng(dim + 10 * (periodic is not None) + int(spread * 10))
     n = 2500
     lo, hi = np.full(dim, -0.15), np.full(dim, 0.15)
     if periodic:
         lo[-1], hi[-1] = 0.0, periodic
     pos = jnp.asarray(rng.uniform(lo, hi, (n, dim)), dtype)
-    jx, cp = _setups(dim, periodic, lo, hi)
+    jx, cp = _setups(dim, periodic, lo, hi, pair_order=pair_order)
     nbrs = jx.allocate(pos, min_cell_capacity=40)
     moved = pos * spread + jnp.asarray(rng.normal(0.0, 0.003, (n, dim)), dtype)
     if periodic:
@@ -53,10 +58,51 @@ def test_same_pairs_order_and_sources(dim, periodic, dtype, spread):
     assert int(jnp.sum(sb >= 0)) > 0.3 * int(jnp.sum(b.idx[0] < n))  # pairs carried over
     np.testing.assert_array_equal(np.asarray(a.reference_position),
                                   np.asarray(b.reference_position))
+    i, j = np.asarray(b.idx)
+    if pair_order == "index":
+        assert a.order is None and b.order is None
+        key = i.astype(np.int64) * (n + 1) + j
+    else:  # the cell order: a permutation, by flat cell and by index within a cell
+        np.testing.assert_array_equal(np.asarray(a.order), np.asarray(b.order))
+        order = np.asarray(b.order)
+        np.testing.assert_array_equal(np.sort(order), np.arange(n))
+        cell = np.asarray(jx.grid.flat(jx.grid.cell_index(jx.to_box(moved))))[order]
+        assert np.all((np.diff(cell) > 0) | ((np.diff(cell) == 0) & (np.diff(order) > 0)))
+        rank = np.full(n + 1, n)
+        rank[order] = np.arange(n)
+        key = rank[i].astype(np.int64) * (n + 1) + j
+    assert np.all(np.diff(key) > 0) or np.all(np.diff(key[i < n]) > 0)  # sorted, padding last
+    assert np.all(i[np.argmax(i == n):] == n) and np.all(i[i < n] < j[i < n])
     # the data carried as remap_pair_data carries it
     data = jnp.arange(nbrs.idx.shape[1], dtype=jnp.float64) + 1.0
     np.testing.assert_array_equal(np.asarray(remap_pair_data(nbrs.idx, data, b.idx, n)),
                                   np.where(np.asarray(sb) >= 0, np.asarray(sb) + 1.0, 0.0))
+
+
+def test_a_numbering_that_keeps_neighbours_near_is_kept():
+    """Pair order "cell": particles numbered along their cells need no layout of their own
+    (NeighborSetup.layout_order): both builds keep the canonical list and give the order
+    0 .. N-1; the same particles numbered at random get the cell order."""
+    rng = np.random.default_rng(7)
+    n, lo, hi = 2500, np.full(3, -0.15), np.full(3, 0.15)
+    jx, cp = _setups(3, None, lo, hi, pair_order="cell")
+    pos = jnp.asarray(rng.uniform(lo, hi, (n, 3)))
+    pos = pos[jx.grid.order(jx.to_box(pos))]  # numbered along the cells
+    nbrs = jx.allocate(pos, min_cell_capacity=40)
+    np.testing.assert_array_equal(np.asarray(nbrs.order), np.arange(n))
+    moved = pos + jnp.asarray(rng.normal(0.0, 0.003, (n, 3)))
+    (a, _), (b, _) = _both((jx, cp), moved, nbrs)
+    for x in (a, b):
+        np.testing.assert_array_equal(np.asarray(x.order), np.arange(n))
+        i, j = np.asarray(x.idx)
+        key = i.astype(np.int64) * (n + 1) + j
+        assert np.all(np.diff(key[i < n]) > 0)  # canonical
+    np.testing.assert_array_equal(np.asarray(a.idx), np.asarray(b.idx))
+    shuffled = moved[rng.permutation(n)]
+    (c, _), (d, _) = _both((jx, cp), shuffled, jx.allocate(shuffled, min_cell_capacity=40))
+    np.testing.assert_array_equal(np.asarray(c.order), np.asarray(d.order))
+    np.testing.assert_array_equal(np.asarray(c.order),
+                                  np.asarray(jx.grid.order(jx.to_box(shuffled))))
 
 
 def test_overflows_are_flagged_alike():

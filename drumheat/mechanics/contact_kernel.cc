@@ -33,6 +33,7 @@
 //  14 particle-wall tables (6, T, W) S: the same per particle type and wall
 //  15 wall angular velocities about z (W) S          16 temperatures (N or 0) f64
 //  17 wall distance before the step (N, W) S (friction heat; else length 0)
+//  18 the particles in the order of their cells (N) s32 (a permutation), or length 0
 // Attributes: dt, L (period of the last axis, 0 = none), law (conduction, < 0 = none), h
 // (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling), fh
 // (1: friction heat), cgap (the gap tolerance of output 11).
@@ -70,21 +71,39 @@
 // a wall contact's particle k_p / (k_p + k_w) D with the walls' k_w (attribute kw), the rest is
 // the walls'. ContactHeat's inputs: 0 velocities (N, D) S, 1 spins (N, 3) or (N) S, 2 pairs
 // (2, M) s32, 3 pair rows (M, KP) S, 4 wall rows (N W, KW) S, 5 wall velocity (N, W, D) S, 6
-// wall angular velocities (W) S, 7 conductivities (N or 0) f64; attributes dt, kw; outputs 0
-// the heat of each particle (N) f64, 1 the walls' and all contacts' (2) f64, J.
+// wall angular velocities (W) S, 7 conductivities (N or 0) f64, 8 the cell order (N or 0) s32
+// (input 18 of Contacts: the chunks are cut as there); attributes dt, kw; outputs 0 the heat of
+// each particle (N) f64, 1 the walls' and all contacts' (2) f64, J.
 //
-// Threads: the particles are cut into C equal ranges, C = the threads of XLA's intra-op pool, at
-// most one per MIN_CHUNK listed pairs (DRUMHEAT_KERNEL_THREADS sets C); chunk c takes the pair
-// slots whose first particle i lies in range c (the pairs come sorted by i, padding last, as
-// neighbors.sort_pairs leaves them; a list not so sorted is cut into C equal runs of slots),
-// the wall slots of those particles and an equal share of the padding slots (whose outputs are
-// only zeroed). Cut by particles, the chunks share the work evenly however
-// many padding slots the list has (cut by slots, the first chunk took nearly all the pairs of a
-// list half padding), and each pair's chunk does not depend on the capacity or the skin of the
-// list. Both passes (Contacts and ContactHeat) cut their chunks so. The calling thread runs
-// chunk 0 and then takes any chunk no pool thread has started; chunk c accumulates its forces
-// (and the second pass its heat) in its own buffer and the buffers are summed in chunk order, so
-// the result depends on C (round-off) and on nothing else, whichever thread ran which chunk.
+// Cell order (input 18): the loop reads both partners' data for every listed pair, so where the
+// particles' numbering has no relation to their places (a bed that has mixed for a while, see
+// docs/performance.md) nearly every pair misses the cache twice. The neighbour build then lists
+// the pairs grouped by their first particle in the order of the particles' cells
+// (NeighborList.order, neighbor_kernel.cc `ranked`), and given that order the loop first copies
+// the positions, velocities, spins, radii, masses, moments of inertia and temperatures into it,
+// looks up each partner's rank, sums the forces, torques and heat at the ranks and puts the sums
+// back in the particles' numbering at the end: consecutive pairs and both partners of a pair
+// then lie near each other in memory, however the particles are numbered. Each sum takes its
+// terms in the list's order, as without the order; the per-slot arrays and the particle types
+// stay in the particles' numbering. (Laying the data out in the cell order alone, with the
+// pairs taken in the order of the numbering, gained nothing: docs/performance.md.) An order
+// 0 .. N-1, which the build gives while the particles' own numbering keeps neighbours near in
+// memory (NeighborSetup.layout_order), means no copies: the loop runs as without an order.
+//
+// Threads: the particles are cut into C equal ranges (of indices, or of ranks in the cell
+// order), C = the threads of XLA's intra-op pool, at most one per MIN_CHUNK listed pairs
+// (DRUMHEAT_KERNEL_THREADS sets C); chunk c takes the pair slots whose first particle i lies in
+// range c (the pairs come sorted by i or grouped in the cell order, padding last, as
+// neighbors.sort_pairs leaves them; any other list is computed right, in uneven chunks: see
+// `chunks`), the wall slots of the particles of index range c and an equal share of the padding
+// slots (whose outputs are only zeroed). Cut by particles, the chunks share the work evenly
+// however many padding slots the list has (cut by slots, the first chunk took nearly all the
+// pairs of a list half padding), and each pair's chunk does not depend on the capacity or the
+// skin of the list. Both passes (Contacts and ContactHeat) cut their chunks so. The calling
+// thread runs chunk 0 and then takes any chunk no pool thread has started; chunk c accumulates
+// its forces (and the second pass its heat) in its own buffer and the buffers are summed in
+// chunk order, so the result depends on C (round-off) and on nothing else, whichever thread ran
+// which chunk.
 //
 // Vector instructions: a chunk takes its pair slots in blocks of 256; within_reach tells which
 // lie within reach, Loop::tile gathers those 64 at a time into a Tile (one array per quantity)
@@ -427,22 +446,25 @@ struct Block {
 };
 
 // The Block of the pair slots k of (pi, pj) [0, cnt): d from i to j (the nearest periodic image
-// of the last axis with PERIODIC) and |d|^2, and whether the pair lies within reach, i.e. its
-// centre distance |d| is at most the bound r_i + r_j + max(gap, cg) beyond which it can neither
-// touch, conduct across the gap (gap = gapf d_min, gapf the conduction gap tolerance, 0 without
-// one) nor count in output 11 (cg = cgap d_min): the exact tests of Loop::tile (on the overlap,
-// as the JAX kernel decides) cannot pass beyond it (the factor 1.0001 on the squares keeps
-// round-off on the safe side). 0 for a padding slot (i >= n). One loop without branches over
-// the slots, in vector instructions: the partners' data are read for every listed pair here,
-// and about three in four lie out of reach in a turning bed.
-template <typename S, int D, bool PERIODIC>
+// of the last axis with PERIODIC; with RANKED the partners' data read at their ranks rk) and
+// |d|^2, and whether the pair lies within reach, i.e. its centre distance |d| is at most the
+// bound r_i + r_j + max(gap, cg) beyond which it can neither touch, conduct across the gap
+// (gap = gapf d_min, gapf the conduction gap tolerance, 0 without one) nor count in output 11
+// (cg = cgap d_min): the exact tests of Loop::tile (on the overlap, as the JAX kernel decides)
+// cannot pass beyond it (the factor 1.0001 on the squares keeps round-off on the safe side).
+// 0 for a padding slot (i >= n). One loop without branches over the slots, in vector
+// instructions: the partners' data are read for every listed pair here, and about three in
+// four lie out of reach in a turning bed.
+template <typename S, int D, bool PERIODIC, bool RANKED>
 DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int32_t* __restrict pj,
                                          int cnt, const S* __restrict x, const S* __restrict r,
-                                         int32_t n, S L, S gapf, S cgap, Block<S, D>& b) {
+                                         const int32_t* __restrict rk, int32_t n, S L, S gapf,
+                                         S cgap, Block<S, D>& b) {
   for (int k = 0; k < cnt; ++k) {
     const int32_t i0 = pi[k], j0 = pj[k];
     const bool real = i0 < n;
-    const int32_t i = real ? i0 : 0, j = real ? j0 : 0;  // padding reads particle 0
+    const int32_t iu = real ? i0 : 0, ju = real ? j0 : 0;  // padding reads particle 0
+    const int32_t i = RANKED ? rk[iu] : iu, j = RANKED ? rk[ju] : ju;  // where their data lie
     S d[D];
     for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
     if constexpr (PERIODIC) d[2] = nearest_image(d[2], L);
@@ -511,22 +533,32 @@ struct Chunks {
 };
 
 // the chunks for the pairs P (2, M) of n particles with nw walls: C from the listed pairs (the
-// slots before the padding i = n when the list is sorted by i), the pair slots cut where the
-// particle ranges begin (equal runs of slots if the list is not sorted by i: the padding is
-// then found slot by slot)
-// whether P[0 .. m) never decreases: one pass without an early exit, which the compiler turns
-// into vector instructions (std::is_sorted's exit test per element keeps it a scalar loop, and
-// every call checks the whole list)
-bool non_decreasing(const int32_t* P, int64_t m) {
-  int bad = 0;
-  for (int64_t k = 1; k < m; ++k) bad |= P[k] < P[k - 1];
-  return bad == 0;
-}
-
-Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int64_t nw) {
-  const bool by_particle = non_decreasing(P, m);
-  const int64_t listed =
-      by_particle ? std::lower_bound(P, P + m, static_cast<int32_t>(n)) - P : m;
+// slots before the padding i = n), the pair slots cut where the particle ranges begin. rk: null
+// (the ranges are of particle indices, for a list sorted by i) or each particle's rank in the
+// cell order (ranges of ranks, for a list grouped in that order, Loop::RK). The cuts are found
+// by binary searches, which assume the list so sorted, as the neighbour builds leave it; any
+// other list is still computed right: the cuts are kept in order (every slot in one chunk),
+// and unless every slot past the first padding slot found is padding, all slots count as
+// listed (the scan tells padding from pairs slot by slot); its chunks are only uneven.
+Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int64_t nw,
+              const int32_t* rk) {
+  // the slot's particle range key: its first particle's index (or rank), n for padding
+  auto key = [&](int64_t k) -> int64_t {
+    const int32_t i = P[k];
+    return i < n ? (rk ? rk[i] : i) : n;
+  };
+  auto first_at_least = [&](int64_t v) {  // the first slot whose key is at least v
+    int64_t lo = 0, hi = m;
+    while (lo < hi) {
+      const int64_t mid = lo + (hi - lo) / 2;
+      if (key(mid) < v) lo = mid + 1; else hi = mid;
+    }
+    return lo;
+  };
+  int64_t listed = first_at_least(n);
+  int tail = 0;  // whether a pair lies past it (one pass without an early exit: vectorised)
+  for (int64_t k = listed; k < m; ++k) tail |= P[k] < n;
+  if (tail) listed = m;
   int64_t nc = pool.num_threads();
   if (nc > listed / MIN_CHUNK) nc = listed / MIN_CHUNK;
   if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nc = std::atoi(e);  // exactly
@@ -534,8 +566,7 @@ Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int
   if (nc < 1) nc = 1;
   Chunks ch{n, nw, nc, std::vector<int64_t>(nc + 1, listed), std::vector<int64_t>(nc + 1, m)};
   for (int64_t c = 0; c < nc; ++c) {
-    ch.kb[c] = by_particle ? std::lower_bound(P, P + m, static_cast<int32_t>(n * c / nc)) - P
-                           : m * c / nc;
+    ch.kb[c] = c == 0 ? 0 : std::min(std::max(first_at_least(n * c / nc), ch.kb[c - 1]), listed);
     ch.pb[c] = listed + (m - listed) * c / nc;
   }
   return ch;
@@ -558,7 +589,7 @@ void for_chunks(ffi::ThreadPool& pool, int64_t nc, std::function<void(int)> run)
 // the buffers of one call, untyped (their dtype is checked in ContactsImpl)
 struct Call {
   const void *x, *v, *w, *r, *ms, *in, *sp, *wd, *wn, *wv, *ws, *tpp, *tpw, *wom, *wd0;
-  const int32_t *pt, *P;
+  const int32_t *pt, *P, *order;  // order: null, or the particles in the order of their cells
   const double* temp;
   void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX, *PW, *WW;
   double *Q, *R;
@@ -581,6 +612,10 @@ struct Loop {
   int64_t n, m, nw, nt;
   const S *x, *v, *w, *r, *ms, *in, *sp, *WD, *WN, *WV, *WS, *WOM, *WD0;
   const int32_t *pt, *P;
+  // RK: null, or where each particle's data lie in x, v, w, r, ms, in and TK (its rank in the
+  // cell order: run() gathers the particles' data into that order, and the forces, torques and
+  // heat are summed there); pt and every per-slot array stay in the particles' own numbering
+  const int32_t* RK = nullptr;
   S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;
   bool* CD;
   const double* TK;
@@ -614,6 +649,9 @@ struct Loop {
     roll_pw = roll_pw && rot;
   }
 
+  // where the data of particle i lie (its rank in the cell order, or i)
+  int32_t at(int32_t i) const { return RK ? RK[i] : i; }
+
   // the law of the listed pair (i, j)
   const Law<S>& pair_law(int32_t i, int32_t j) const {
     return one_type ? pp[0] : pp[pt[i]*nt + pt[j]];
@@ -622,7 +660,7 @@ struct Loop {
   // friction heat: the springs' energy before the step, |xi_old|^2 and the overlap before the
   // step's drift (read before the spring is written)
   S spring2(int64_t k) const { return fh ? dot<S, D>(sp + D*k, sp + D*k) : S(0); }
-  S overlap0(int32_t i, int32_t j) const {
+  S overlap0(int32_t i, int32_t j) const {  // i, j: where their data lie (at)
     return fh ? overlap_before<S, D>(x + D*i, x + D*j, v + D*i, v + D*j, r[i] + r[j], dt, L)
               : S(0);
   }
@@ -654,12 +692,19 @@ struct Loop {
     for (int64_t b0 = k0; b0 < k1; b0 += BLOCK) {
       const int64_t b1 = b0 + BLOCK < k1 ? b0 + BLOCK : k1;
       const int nb = static_cast<int>(b1 - b0);
-      if (D == 3 && L > S(0))
-        within_reach<S, D, true>(P + b0, P + m + b0, nb, x, r, static_cast<int32_t>(n), L,
-                                 gap_on ? tol : S(0), cgap, *bl);
-      else
-        within_reach<S, D, false>(P + b0, P + m + b0, nb, x, r, static_cast<int32_t>(n), L,
-                                  gap_on ? tol : S(0), cgap, *bl);
+      const int32_t n32 = static_cast<int32_t>(n);
+      const S gapf = gap_on ? tol : S(0);
+      if (D == 3 && L > S(0)) {
+        if (RK) within_reach<S, D, true, true>(P + b0, P + m + b0, nb, x, r, RK, n32, L, gapf,
+                                               cgap, *bl);
+        else within_reach<S, D, true, false>(P + b0, P + m + b0, nb, x, r, RK, n32, L, gapf,
+                                             cgap, *bl);
+      } else {
+        if (RK) within_reach<S, D, false, true>(P + b0, P + m + b0, nb, x, r, RK, n32, L, gapf,
+                                                cgap, *bl);
+        else within_reach<S, D, false, false>(P + b0, P + m + b0, nb, x, r, RK, n32, L, gapf,
+                                              cgap, *bl);
+      }
       // zero where nothing touches (written here, while the lines are at hand: a sweep over
       // the whole output first would pass them through the cache twice where they do not fit)
       for (int64_t k = b0; k < b1; ++k) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
@@ -672,7 +717,7 @@ struct Loop {
         cnt += within[q];
         if (fh && !within[q] && P[k] < n) {  // read the old spring before it is cleared
           const int32_t i = P[k], j = P[m + k];
-          opened<S>(pair_law(i, j), overlap0(i, j), spring2(k), PW + KP*k + KP - 1, R);
+          opened<S>(pair_law(i, j), overlap0(at(i), at(j)), spring2(k), PW + KP*k + KP - 1, R);
         }
         clear_unless<S, D>(Sn + D*k, within[q]);  // a padding slot is never within reach
       }
@@ -695,8 +740,8 @@ struct Loop {
          S* T, double* Q, double* R) const {
     for (int q = 0; q < cnt; ++q) {
       const int64_t k = near[q], b = k - b0;
-      const int32_t i = P[k], j = P[m + k];
-      const Law<S>& law = pair_law(i, j);
+      const int32_t iu = P[k], ju = P[m + k], i = at(iu), j = at(ju);
+      const Law<S>& law = pair_law(iu, ju);
       for (int c = 0; c < D; ++c) {
         t.d[c][q] = bl.d[c][b]; t.vi[c][q] = v[D*i + c]; t.vj[c][q] = v[D*j + c];
         t.so[c][q] = sp[D*k + c];
@@ -717,7 +762,7 @@ struct Loop {
     S max_ov = S(0);
     for (int q = 0; q < cnt; ++q) {
       const int64_t k = near[q];
-      const int32_t i = P[k], j = P[m + k];
+      const int32_t i = at(P[k]), j = at(P[m + k]);  // where their data and sums lie
       const S ri = t.ri[q], rj = t.rj[q], rmin = ri < rj ? ri : rj;
       const S ov = t.ov[q], dist = t.dist[q];
       S* s = Sn + D*k;
@@ -774,14 +819,14 @@ struct Loop {
   S walls(int64_t s0, int64_t s1, S* F, S* T, double* R) const {
     S max_ov = S(0);
   for (int64_t q = s0; q < s1; ++q) {
-    const int64_t p = q / nw, wl = q % nw;
+    const int64_t pu = q / nw, wl = q % nw, p = at(static_cast<int32_t>(pu));  // p: its data
     S* s = WSo + D*q;
     const S* so = WS + D*q;
     S* hw = fh ? WW + KW*q : nullptr;  // friction heat row (header)
     if (fh) for (int c = 0; c < KW; ++c) hw[c] = S(0);
     const S rp = r[p];
     const S ov = rp - WD[q];
-    const Law<S>& law = pw[(one_type ? 0 : pt[p])*nw + wl];
+    const Law<S>& law = pw[(one_type ? 0 : pt[pu])*nw + wl];
     const S xi2 = fh ? dot<S, D>(so, so) : S(0);
     const S ov0 = fh ? rp - WD0[q] : S(0);  // the walls before the step, from JAX
     WO[q] = S(0); WF[q] = S(0);
@@ -825,12 +870,84 @@ struct Loop {
   }
 };
 
+// The layout of the cell order (Call::order) in one buffer: the ranks (N s32: where each
+// particle's data lie), then x, v (D N), w (DW N), r, ms, in (N) in S, then the temperatures (N
+// doubles, with conduction). ranks() fills the ranks, gather() copies the data, the chunks'
+// threads a range of ranks each.
 template <typename S, int D>
-void run(ffi::ThreadPool& pool, const Call& a) {
+struct Layout {
+  static constexpr int DW = D == 3 ? 3 : 1;
+  int64_t n, nr, ns;
+  explicit Layout(int64_t n_)
+      : n(n_), nr((4*n_ + 7)/8), ns((static_cast<int64_t>(sizeof(S))*(2*D + DW + 3)*n_ + 7)/8) {}
+  int64_t doubles() const { return nr + ns + n; }
+  int32_t* rank(Buffer& b) const { return reinterpret_cast<int32_t*>(b.data()); }
+  S* data(Buffer& b) const { return reinterpret_cast<S*>(b.data() + nr); }
+  double* temp(Buffer& b) const { return b.data() + nr + ns; }
+};
+
+// whether `order` (N) is 0 .. N-1 (the numbering will do: no layout; one pass without an early
+// exit, in vector instructions)
+bool identity(const int32_t* order, int64_t n) {
+  int off = 0;
+  for (int64_t p = 0; p < n; ++p) off |= order[p] != p;
+  return off == 0;
+}
+
+// each particle's rank in `order` into rk (N); false if `order` is not a permutation of 0 .. N-1
+bool ranks(const int32_t* order, int64_t n, int32_t* rk) {
+  std::memset(rk, 0xff, sizeof(int32_t) * n);  // -1: no rank yet
+  for (int64_t p = 0; p < n; ++p) {
+    const int64_t u = order[p];
+    if (u < 0 || u >= n || rk[u] >= 0) return false;
+    rk[u] = static_cast<int32_t>(p);
+  }
+  return true;
+}
+
+template <typename S, int D>
+void gather(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp, const Layout<S, D>& lay,
+            Buffer& buf) {
   constexpr int DW = Loop<S, D>::DW;
-  const Loop<S, D> lp(a);
+  const int64_t n = lp.n;
+  S* xs = lay.data(buf);
+  S *vs = xs + D*n, *ws = vs + D*n, *rs = ws + DW*n, *mss = rs + n, *ins = mss + n;
+  double* ts = lay.temp(buf);
+  const int32_t* od = lp.a.order;
+  for_chunks(pool, nc, [&](int c) {
+    for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) {
+      const int64_t u = od[p];
+      for (int q = 0; q < D; ++q) { xs[D*p + q] = lp.x[D*u + q]; vs[D*p + q] = lp.v[D*u + q]; }
+      for (int q = 0; q < DW; ++q) ws[DW*p + q] = lp.w[DW*u + q];
+      rs[p] = lp.r[u]; mss[p] = lp.ms[u]; ins[p] = lp.in[u];
+      if (lp.heat_on) ts[p] = lp.TK[u];
+    }
+  });
+  lp.x = xs; lp.v = vs; lp.w = ws; lp.r = rs; lp.ms = mss; lp.in = ins;
+  if (lp.heat_on) lp.TK = ts;
+  lp.RK = lay.rank(buf);
+}
+
+template <typename S, int D>
+bool run(ffi::ThreadPool& pool, const Call& a) {
+  constexpr int DW = Loop<S, D>::DW;
+  Loop<S, D> lp(a);
   const int64_t n = a.n, m = a.m;
   const bool heat_on = lp.heat_on;
+  // with a cell order the pairs are taken in the list's order (grouped in the cell order by
+  // the neighbour build), the chunks are ranges of ranks and sum at the ranks, every chunk into
+  // its own buffer, and the sums are put back in the particles' numbering at the end; without,
+  // chunk 0 sums into the outputs
+  const bool ranked = a.order != nullptr && !identity(a.order, n);
+  const Layout<S, D> layout(n);
+  std::unique_ptr<Buffer> lay;
+  if (ranked) {
+    lay = take_buffer(layout.doubles());
+    if (!ranks(a.order, n, layout.rank(*lay))) { give_buffer(std::move(lay)); return false; }
+  }
+  const Chunks ch = chunks(pool, a.P, n, m, a.nw, ranked ? layout.rank(*lay) : nullptr);
+  const int64_t nc = ch.nc;
+  if (ranked) gather<S, D>(pool, nc, lp, layout, *lay);
   auto work = [&](const Chunks& ch, int64_t c, S* F, S* T, double* Q, double* R) -> S {
     lp.padding(ch.pb[c], ch.pb[c + 1]);
     const S p = lp.pairs(ch.kb[c], ch.kb[c + 1], F, T, Q, R);
@@ -841,24 +958,25 @@ void run(ffi::ThreadPool& pool, const Call& a) {
   S* F0 = static_cast<S*>(a.F);
   S* T0 = static_cast<S*>(a.T);
   double *Q0 = a.Q, *R0 = a.R;
-  std::memset(F0, 0, sizeof(S) * D * n);
-  std::memset(T0, 0, sizeof(S) * DW * n);
-  if (heat_on) std::memset(Q0, 0, sizeof(double) * n);
-  std::memset(R0, 0, sizeof(double) * 3);
-  const Chunks ch = chunks(pool, a.P, n, m, a.nw);
-  const int64_t nc = ch.nc;
+  if (!ranked) {
+    std::memset(F0, 0, sizeof(S) * D * n);
+    std::memset(T0, 0, sizeof(S) * DW * n);
+    if (heat_on) std::memset(Q0, 0, sizeof(double) * n);
+    std::memset(R0, 0, sizeof(double) * 3);
+  }
   S* MX = static_cast<S*>(a.MX);
   // a buffer holds the (D + DW) N forces and torques in its first fs doubles, then N doubles
-  // of conduction heat, then 3 of loss rates (chunk 0 writes into the outputs)
+  // of conduction heat, then 3 of loss rates
   const int64_t fs = (static_cast<int64_t>(sizeof(S)) * (D + DW) * n + 7) / 8;
-  std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
+  const int64_t own = ranked ? 0 : 1;  // the chunks that sum into the outputs
+  std::vector<std::unique_ptr<Buffer>> acc(nc - own);
   for (auto& b : acc) b = take_buffer(fs + n + 3);
   std::vector<S> mx(nc, S(0));
   for_chunks(pool, nc, [&](int c) {
     S *F = F0, *T = T0;
     double *Q = Q0, *R = R0;
-    if (c > 0) {
-      double* b = acc[c - 1]->data();
+    if (c >= own) {
+      double* b = acc[c - own]->data();
       F = reinterpret_cast<S*>(b); T = F + D * n; Q = b + fs; R = b + fs + n;
       std::memset(b, 0, sizeof(double) * fs);
       std::memset(R, 0, sizeof(double) * 3);
@@ -867,24 +985,56 @@ void run(ffi::ThreadPool& pool, const Call& a) {
     mx[c] = work(ch, c, F, T, Q, R);
   });
   S max_ov = mx[0];
-  for (int64_t c = 1; c < nc; ++c) {
-    const double* b = acc[c - 1]->data();
-    const S* f = reinterpret_cast<const S*>(b);
-    for (int64_t q = 0; q < D * n; ++q) F0[q] += f[q];
-    for (int64_t q = 0; q < DW * n; ++q) T0[q] += f[D * n + q];
-    if (heat_on)
-      for (int64_t q = 0; q < n; ++q) Q0[q] += b[fs + q];
-    for (int q = 0; q < 3; ++q) R0[q] += b[fs + n + q];
+  for (int64_t c = 1; c < nc; ++c)
     if (mx[c] > max_ov) max_ov = mx[c];
+  if (!ranked) {
+    for (int64_t c = 1; c < nc; ++c) {
+      const double* b = acc[c - 1]->data();
+      const S* f = reinterpret_cast<const S*>(b);
+      for (int64_t q = 0; q < D * n; ++q) F0[q] += f[q];
+      for (int64_t q = 0; q < DW * n; ++q) T0[q] += f[D * n + q];
+      if (heat_on)
+        for (int64_t q = 0; q < n; ++q) Q0[q] += b[fs + q];
+      for (int q = 0; q < 3; ++q) R0[q] += b[fs + n + q];
+    }
+  } else {  // the chunks' sums, added in chunk order as above, back in the particles' numbering
+    const int32_t* od = a.order;
+    for_chunks(pool, nc, [&](int cc) {
+      for (int64_t p = n*cc/nc; p < n*(cc + 1)/nc; ++p) {
+        const int64_t u = od[p];
+        S f[D], t[DW];
+        double q = 0;
+        for (int64_t c = 0; c < nc; ++c) {
+          const double* b = acc[c]->data();
+          const S* g = reinterpret_cast<const S*>(b);
+          for (int k = 0; k < D; ++k) f[k] = c ? f[k] + g[D*p + k] : g[D*p + k];
+          for (int k = 0; k < DW; ++k) t[k] = c ? t[k] + g[D*n + DW*p + k] : g[D*n + DW*p + k];
+          if (heat_on) q = c ? q + b[fs + p] : b[fs + p];
+        }
+        for (int k = 0; k < D; ++k) F0[D*u + k] = f[k];
+        for (int k = 0; k < DW; ++k) T0[DW*u + k] = t[k];
+        if (heat_on) Q0[u] = q;
+      }
+    });
+    for (int q = 0; q < 3; ++q) {
+      double r = 0;
+      for (int64_t c = 0; c < nc; ++c) {
+        const double rc = acc[c]->data()[fs + n + q];
+        r = c ? r + rc : rc;
+      }
+      R0[q] = r;
+    }
+    give_buffer(std::move(lay));
   }
   for (auto& b : acc) give_buffer(std::move(b));
   MX[0] = max_ov;
+  return true;
 }
 
 // the buffers of one call of the friction heat's second pass (ContactHeatImpl)
 struct HeatCall {
   const void *v, *w, *PW, *WW, *wv, *wom;
-  const int32_t* P;
+  const int32_t *P, *order;  // order: as Call::order (null: none), for the chunks only
   const double* K;  // conductivities (N), or null: half and half
   double *E, *SUM;
   int64_t n, m, nw;
@@ -894,7 +1044,7 @@ struct HeatCall {
 // Friction heat, second pass (see the header): each contact's loss D at the full-step
 // velocities from the rows of the first pass, split between its partners (dissipation.step_heat)
 template <typename S, int D>
-void heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
+bool heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
   constexpr int DW = D == 3 ? 3 : 1;
   constexpr int KP = 3*D + DW + 1, KW = 2*D + DW + 1;
   const int64_t n = a.n, m = a.m, nw = a.nw;
@@ -934,7 +1084,11 @@ void heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
   double *E0 = a.E, *S0 = a.SUM;
   std::memset(E0, 0, sizeof(double) * n);
   S0[0] = S0[1] = 0.0;
-  const Chunks ch = chunks(pool, P, n, m, nw);  // as the first pass cut them
+  // the chunks as the first pass cuts them
+  const bool ranked = a.order != nullptr && !identity(a.order, n);
+  std::vector<int32_t> rk(ranked ? n : 0);
+  if (ranked && !ranks(a.order, n, rk.data())) return false;
+  const Chunks ch = chunks(pool, P, n, m, nw, ranked ? rk.data() : nullptr);
   const int64_t nc = ch.nc;
   std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
   for (auto& b : acc) b = take_buffer(n + 2);
@@ -952,6 +1106,7 @@ void heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
     S0[0] += b[n]; S0[1] += b[n + 1];
   }
   for (auto& b : acc) give_buffer(std::move(b));
+  return true;
 }
 
 }  // namespace
@@ -961,7 +1116,8 @@ static ffi::Error ContactsImpl(
     ffi::AnyBuffer rad, ffi::AnyBuffer mass, ffi::AnyBuffer inertia, ffi::Buffer<ffi::S32> ptype,
     ffi::Buffer<ffi::S32> pairs, ffi::AnyBuffer spring, ffi::AnyBuffer wdist, ffi::AnyBuffer wnrm,
     ffi::AnyBuffer wvel, ffi::AnyBuffer wspring, ffi::AnyBuffer tab_pp, ffi::AnyBuffer tab_pw,
-    ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, ffi::AnyBuffer wdist0, double dt,
+    ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, ffi::AnyBuffer wdist0,
+    ffi::Buffer<ffi::S32> order, double dt,
     double L, int32_t law, double h, double tol, int32_t rot, int32_t fh, double cgap,
     ffi::Result<ffi::AnyBuffer> force, ffi::Result<ffi::AnyBuffer> torque,
     ffi::Result<ffi::AnyBuffer> nspring, ffi::Result<ffi::AnyBuffer> ovl_out,
@@ -995,6 +1151,7 @@ static ffi::Error ContactsImpl(
   a.tpw = tab_pw.untyped_data(); a.wom = wall_omega.untyped_data();
   a.wd0 = wdist0.untyped_data();
   a.pt = ptype.typed_data(); a.P = pairs.typed_data(); a.temp = temp.typed_data();
+  a.order = order.element_count() ? order.typed_data() : nullptr;
   a.F = force->untyped_data(); a.T = torque->untyped_data(); a.S = nspring->untyped_data();
   a.OV = ovl_out->untyped_data(); a.DI = dist_out->untyped_data();
   a.FN = fn_out->untyped_data(); a.WS = nwspring->untyped_data();
@@ -1012,12 +1169,15 @@ static ffi::Error ContactsImpl(
                static_cast<int64_t>(wall_rows->element_count()) != a.n * a.nw * (2*dim + dw + 1) ||
                static_cast<int64_t>(wdist0.element_count()) != a.n * a.nw))
     return ffi::Error::InvalidArgument("drumheat_contacts: friction heat rows of wrong size");
+  if (a.order && static_cast<int64_t>(order.element_count()) != a.n)
+    return ffi::Error::InvalidArgument("drumheat_contacts: the cell order must have length N or 0");
   const bool f64 = et == ffi::DataType::F64;
-  if (dim == 3) {
-    if (f64) run<double, 3>(pool, a); else run<float, 3>(pool, a);
-  } else {
-    if (f64) run<double, 2>(pool, a); else run<float, 2>(pool, a);
-  }
+  bool ok;
+  if (dim == 3) ok = f64 ? run<double, 3>(pool, a) : run<float, 3>(pool, a);
+  else ok = f64 ? run<double, 2>(pool, a) : run<float, 2>(pool, a);
+  if (!ok)
+    return ffi::Error::InvalidArgument("drumheat_contacts: the cell order is not a permutation "
+                                       "of the particles");
   return ffi::Error::Success();
 }
 
@@ -1031,7 +1191,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::AnyBuffer>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
-        .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::AnyBuffer>()
+        .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
         .Attr<double>("dt").Attr<double>("L").Attr<int32_t>("law").Attr<double>("h")
         .Attr<double>("tol").Attr<int32_t>("rot").Attr<int32_t>("fh").Attr<double>("cgap")
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
@@ -1044,8 +1204,8 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
 static ffi::Error ContactHeatImpl(
     ffi::ThreadPool pool, ffi::AnyBuffer vel, ffi::AnyBuffer omg, ffi::Buffer<ffi::S32> pairs,
     ffi::AnyBuffer pair_rows, ffi::AnyBuffer wall_rows, ffi::AnyBuffer wvel,
-    ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> cond, double dt, double kw,
-    ffi::ResultBuffer<ffi::F64> heat, ffi::ResultBuffer<ffi::F64> sums) {
+    ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> cond, ffi::Buffer<ffi::S32> order,
+    double dt, double kw, ffi::ResultBuffer<ffi::F64> heat, ffi::ResultBuffer<ffi::F64> sums) {
   const ffi::DataType et = vel.element_type();
   if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
     return ffi::Error::InvalidArgument("drumheat_contact_heat: velocities must be f32 or f64");
@@ -1064,8 +1224,10 @@ static ffi::Error ContactHeatImpl(
   if (static_cast<int64_t>(pair_rows.element_count()) != a.m * (3*dim + dw + 1) ||
       static_cast<int64_t>(wall_rows.element_count()) != a.n * a.nw * (2*dim + dw + 1) ||
       static_cast<int64_t>(wvel.element_count()) != a.n * a.nw * dim ||
-      (cond.element_count() != 0 && static_cast<int64_t>(cond.element_count()) != a.n))
+      (cond.element_count() != 0 && static_cast<int64_t>(cond.element_count()) != a.n) ||
+      (order.element_count() != 0 && static_cast<int64_t>(order.element_count()) != a.n))
     return ffi::Error::InvalidArgument("drumheat_contact_heat: buffers of wrong size");
+  a.order = order.element_count() ? order.typed_data() : nullptr;
   a.v = vel.untyped_data(); a.w = omg.untyped_data(); a.P = pairs.typed_data();
   a.PW = pair_rows.untyped_data(); a.WW = wall_rows.untyped_data();
   a.wv = wvel.untyped_data(); a.wom = wall_omega.untyped_data();
@@ -1073,11 +1235,12 @@ static ffi::Error ContactHeatImpl(
   a.E = heat->typed_data(); a.SUM = sums->typed_data();
   a.dt = dt; a.kw = kw;
   const bool f64 = et == ffi::DataType::F64;
-  if (dim == 3) {
-    if (f64) heat_pass<double, 3>(pool, a); else heat_pass<float, 3>(pool, a);
-  } else {
-    if (f64) heat_pass<double, 2>(pool, a); else heat_pass<float, 2>(pool, a);
-  }
+  bool ok;
+  if (dim == 3) ok = f64 ? heat_pass<double, 3>(pool, a) : heat_pass<float, 3>(pool, a);
+  else ok = f64 ? heat_pass<double, 2>(pool, a) : heat_pass<float, 2>(pool, a);
+  if (!ok)
+    return ffi::Error::InvalidArgument("drumheat_contact_heat: the cell order is not a "
+                                       "permutation of the particles");
   return ffi::Error::Success();
 }
 
@@ -1087,6 +1250,6 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Ctx<ffi::ThreadPool>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
-        .Arg<ffi::Buffer<ffi::F64>>()
+        .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::Buffer<ffi::S32>>()
         .Attr<double>("dt").Attr<double>("kw")
         .Ret<ffi::Buffer<ffi::F64>>().Ret<ffi::Buffer<ffi::F64>>());

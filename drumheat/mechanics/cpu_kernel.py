@@ -13,16 +13,20 @@ the JAX walls, so every wall type works. With ``make_dem(..., conduction=...)`` 
 sums the contact heat flows (:mod:`drumheat.mechanics.conduction`, both laws, with its gap
 tolerance). The loop is cut into as many chunks as XLA's intra-op thread pool has threads (at
 most one per 8 000 listed pairs; ``DRUMHEAT_KERNEL_THREADS`` sets the number), each a range of
-particles with their pairs (the list is sorted by the first particle), and run on that
+particles with their pairs (the list is grouped by the first particle), and run on that
 pool, so no threads are started per step; each chunk sums into its own buffer and the buffers
 are added in chunk order, so the result depends on the chunk count by round-off and on nothing
-else. The pair and wall springs are updated in place (aliased buffers). Speed:
+else. The lists of such runs are in the cell order (``NeighborList.order``,
+:mod:`drumheat.mechanics.neighbors`): the loop lays the particles' data out in that order and
+takes the pairs as listed, so that it reads memory in the order of the particles' places
+however they are numbered (a turning bed mixes its numbering; docs/performance.md). The pair and wall springs are updated in place (aliased buffers). Speed:
 docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
 ``scripts/bench_vs_liggghts.py`` the whole step against LIGGGHTS).
 
 The same library holds the neighbour rebuild of such runs (``neighbor_kernel.cc``,
-:func:`neighbor_pairs`): the pairs of the XLA cell list in canonical order and, for carrying the
-springs and other per-pair data, the old slot of each pair.
+:func:`neighbor_pairs`): the pairs of the XLA cell list in its order (canonical, or grouped in
+the cell order) and, for carrying the springs and other per-pair data, the old slot of each
+pair.
 
 Scope: 2D (monolayer: x-y, spin about z) and 3D, float32 and float64 mechanics, any number of
 materials (per-type contact tables), rolling resistance, walls, pair conduction, friction
@@ -280,7 +284,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
              wall_normal, wall_velocity, wall_spring, *, tables_pp, tables_pw, wall_omega, dt,
              periodic_length=None, rotation=True, temperature=None, conduction_law=None,
              conduction_h=0.0, gap_tolerance=0.0, wall_distance_before=None,
-             pair_gap=0.0):
+             pair_gap=0.0, order=None):
     """Particle-particle and particle-wall contact forces in one C++ loop.
 
     The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
@@ -306,6 +310,13 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         ``t - dt``; with it the loop also returns what :func:`contact_heat` needs.
 
       pair_gap: the gap tolerance of ``conducts`` (times the smaller diameter).
+      order: None, or the particles (N,) int32 in the order of their cells (``NeighborList.order``,
+        a permutation), for a list grouped in that order (:func:`neighbor_pairs` with
+        ``ranked``): the loop then copies the particles' data into that order and takes the
+        pairs as listed, so that consecutive pairs and both partners of a pair lie near each
+        other in memory however the particles are numbered, sums at the ranks and puts the sums
+        back. Each sum takes its terms in the list's order, as without ``order``; its threads
+        take ranges of ranks instead of indices (round-off, as another thread count).
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
     wall_overlap, wall_normal_force, max_overlap, heat, conducts, pair_rows, wall_rows,
@@ -353,20 +364,22 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         jnp.asarray(ptype).astype(jnp.int32), idx.astype(jnp.int32), c(spring),
         c(wall_distance), c(wall_normal), c(wall_velocity), c(wall_spring), c(tables_pp),
         c(tables_pw), c(wall_omega), temperature.astype(jnp.float64), c(wd0),
+        jnp.zeros((0,), jnp.int32) if order is None else jnp.asarray(order, jnp.int32),
         dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
         h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
         rot=np.int32(bool(rotation)), fh=np.int32(fh), cgap=np.float64(pair_gap))
 
 
 def contact_heat(vel, omega, idx, pair_rows, wall_rows, wall_velocity, wall_omega, dt,
-                 conductivity=None, wall_conductivity=0.0):
+                 conductivity=None, wall_conductivity=0.0, order=None):
     """Friction heat, the second pass: each contact's loss
     ``D = -dt (F . u + M_r . w_rel) - (U_new - U_old)`` at the full-step velocities ``vel``
     (N, D) and spins ``omega`` from the rows of :func:`contacts` (``pair_rows``, ``wall_rows``;
     ``wall_velocity`` (N, W, D) and ``wall_omega`` (W,) as given to it), split between the
     partners: ``k_A / (k_A + k_B)`` with the particles' ``conductivity`` (N,) and the walls'
     ``wall_conductivity``, or half and half (``conductivity`` None), as
-    :func:`drumheat.mechanics.dissipation.step_heat` does.
+    :func:`drumheat.mechanics.dissipation.step_heat` does. ``order``: the cell order given to
+    :func:`contacts` (its threads then take the same ranges of pairs), or None.
 
     Returns ``(particle, sums)``: the heat into each particle (N,) and ``(walls, all)`` (2,),
     J, float64.
@@ -380,14 +393,16 @@ def contact_heat(vel, omega, idx, pair_rows, wall_rows, wall_velocity, wall_omeg
     return jax.ffi.ffi_call(HEAT_TARGET, [sd((n,), jnp.float64), sd((2,), jnp.float64)])(
         vel, c(omega).reshape((n, 3) if dim == 3 else (n,)), idx.astype(jnp.int32),
         pair_rows, wall_rows, c(wall_velocity), c(wall_omega), k,
+        jnp.zeros((0,), jnp.int32) if order is None else jnp.asarray(order, jnp.int32),
         dt=np.float64(dt), kw=np.float64(wall_conductivity))
 
 
 def neighbor_pairs(position, old_idx, capacity: int, cells, cell_size, cutoff: float,
-                   periodic_length, cell_capacity: int):
+                   periodic_length, cell_capacity: int, ranked: bool = False):
     """A neighbour rebuild in one C++ pass (``neighbor_kernel.cc``): the pairs of
-    :meth:`drumheat.mechanics.neighbors.CellGrid.build` in the canonical order of
-    :func:`~drumheat.mechanics.neighbors.sort_pairs`, pair for pair, and where each came from.
+    :meth:`drumheat.mechanics.neighbors.CellGrid.build` in the order of
+    :func:`~drumheat.mechanics.neighbors.sort_pairs` (canonical, or with ``ranked`` grouped in
+    the cell order), pair for pair, and where each came from.
 
     Args:
       position: box-frame positions (N, D), float32 or float64 (the arithmetic of the JAX
@@ -396,8 +411,11 @@ def neighbor_pairs(position, old_idx, capacity: int, cells, cell_size, cutoff: f
         cutoff: pair cutoff, m; periodic_length: period of the last axis or None;
         cell_capacity: particles one cell may hold (as the JAX build: a pair whose smaller
         index lies beyond it in its cell is not listed; the caller flags the overflow).
+      ranked: the pairs grouped by their first particle in the cell order (``order``), as
+        ``sort_pairs(..., order)``; else in canonical order.
     Returns ``(idx (2, M) int32 padded with N, source (M,) int32: the old slot of each new pair
-    or -1, pairs found, fullest cell)``.
+    or -1, pairs found, fullest cell, order (N,) int32: the particles in the order of their
+    cells, as :meth:`~drumheat.mechanics.neighbors.CellGrid.order`)``.
     """
     load()
     n, dim = position.shape
@@ -405,10 +423,12 @@ def neighbor_pairs(position, old_idx, capacity: int, cells, cell_size, cutoff: f
     size = tuple(float(s) for s in cell_size) + (1.0,) * (3 - len(cell_size))
     i32 = jnp.int32
     sd = jax.ShapeDtypeStruct
-    outs = [sd((2, int(capacity)), i32), sd((int(capacity),), i32), sd((1,), i32), sd((1,), i32)]
-    idx, src, total, fullest = jax.ffi.ffi_call(NEIGHBOR_TARGET, outs)(
+    outs = [sd((2, int(capacity)), i32), sd((int(capacity),), i32), sd((1,), i32), sd((1,), i32),
+            sd((n,), i32)]
+    idx, src, total, fullest, order = jax.ffi.ffi_call(NEIGHBOR_TARGET, outs)(
         position, old_idx.astype(i32), n0=np.int64(cells[0]), n1=np.int64(cells[1]),
         n2=np.int64(cells[2]), s0=np.float64(size[0]), s1=np.float64(size[1]),
         s2=np.float64(size[2]), cut2=np.float64(float(cutoff) ** 2),
-        L=np.float64(periodic_length or 0.0), cap=np.int64(cell_capacity))
-    return idx, src, total[0], fullest[0]
+        L=np.float64(periodic_length or 0.0), cap=np.int64(cell_capacity),
+        ranked=np.int32(bool(ranked)))
+    return idx, src, total[0], fullest[0], order

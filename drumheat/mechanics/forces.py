@@ -80,12 +80,14 @@ class Contacts(NamedTuple):
 
 class KernelWork(NamedTuple):
     """What the C++ loop leaves for the friction heat's second pass
-    (:func:`drumheat.mechanics.cpu_kernel.contact_heat`): the neighbour pairs ``idx`` (2, M),
-    each contact's row (``pair_rows`` (M, K_p), ``wall_rows`` (N W, K_w): force, levers,
+    (:func:`drumheat.mechanics.cpu_kernel.contact_heat`): the neighbour pairs ``idx`` (2, M)
+    and their layout order ``order`` (N,) or None (``NeighborList.order``), each contact's row
+    (``pair_rows`` (M, K_p), ``wall_rows`` (N W, K_w): force, levers,
     rolling torque, change of spring energy), the wall velocities (N, W, dim) of the step and
     its losses at the continuous rates ``rates`` (3,) float64, J (damping, sliding, rolling)."""
 
     idx: jax.Array
+    order: Optional[jax.Array]
     pair_rows: jax.Array
     wall_rows: jax.Array
     wall_velocity: jax.Array
@@ -519,7 +521,7 @@ class CpuContactForces(ContactForces):
          pair_rows, wall_rows, rates) = self._kernel.contacts(
             pos, vel, w, self.radius, self.mass, self.inertia, self.ptype, nbrs.idx,
             pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
-            pair_gap=self.gap_pp)
+            pair_gap=self.gap_pp, order=nbrs.order)
         active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
         # p_cond: the pairs within the conduction gap, pair_gap_mask's test in the C++ loop
@@ -532,7 +534,7 @@ class CpuContactForces(ContactForces):
             heat = None
         work = None
         if self.friction_heat is not None:
-            work = KernelWork(nbrs.idx, pair_rows, wall_rows, wv, rates)
+            work = KernelWork(nbrs.idx, nbrs.order, pair_rows, wall_rows, wv, rates)
         return ForceResult(force + fk, torque + tk, new_spring, new_wall_spring, contacts,
                            mx[0], heat, work)
 
@@ -543,7 +545,8 @@ class CpuContactForces(ContactForces):
         fh = self.friction_heat
         particle, sums = self._kernel.contact_heat(
             vel, w, work.idx, work.pair_rows, work.wall_rows, work.wall_velocity,
-            self._kernel_params["wall_omega"], self.dt, fh.conductivity, fh.wall_conductivity)
+            self._kernel_params["wall_omega"], self.dt, fh.conductivity, fh.wall_conductivity,
+            work.order)
         by_source = jnp.concatenate([work.rates, (sums[1] - jnp.sum(work.rates))[None]])
         return Dissipation(particle, sums[0], by_source)
 

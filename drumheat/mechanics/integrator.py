@@ -67,7 +67,7 @@ from drumheat.mechanics.errors import (
 )
 from drumheat.mechanics.forces import ContactForces, Contacts, make_contact_forces
 from drumheat.mechanics.neighbors import (PEC, NeighborSetup, make_neighbor_setup, pair_sources,
-                                          take_pair_data)
+                                          sort_pairs, take_pair_data)
 from drumheat.models.soft_sphere import STICKING_CONTACTS, default_time_step
 
 __all__ = [
@@ -217,6 +217,18 @@ def remap_pair_extra(kind, pdata, remap):
     return None if pdata is None else kind.remap_pair_arrays(pdata, remap)
 
 
+def _carry_pairs(state: DEMState, new, n: int) -> DEMState:
+    """``state`` with the neighbour list ``new``: the springs and the per-pair data of
+    ``extra`` carried from the state's list to it, pairs matched by identity (the old list is
+    in canonical order when it has no cell order, :func:`pair_sources`)."""
+    source = pair_sources(state.nbrs.idx, new.idx, n, old_sorted=state.nbrs.order is None)
+    remap = lambda a: take_pair_data(a, source)  # noqa: E731
+    pdata = pair_extra(state.extra)
+    extra = state.extra if pdata is None else state.extra.with_pair_arrays(
+        remap_pair_extra(type(state.extra), pdata, remap))
+    return state._replace(nbrs=new, pair_spring=remap(state.pair_spring), extra=extra)
+
+
 def _chunk_diagnostics(state, lo, hi, periodic_axis):
     """Small reductions checked on the host after each chunk."""
     pos = state.position
@@ -344,11 +356,24 @@ class DEM:
 
     def step(self, state: DEMState):
         """One velocity-Verlet step (jittable). Returns ``(new_state, contacts)``."""
-        return self._step(state)
+        return self._step(self.adopt(state))
 
     def run_steps(self, state: DEMState, n_steps: int) -> DEMState:
         """``n_steps`` steps in one jitted loop (``lax.fori_loop``), without host-side checks."""
-        return self._run_steps(state, jnp.asarray(int(n_steps), jnp.int32))
+        return self._run_steps(self.adopt(state), jnp.asarray(int(n_steps), jnp.int32))
+
+    def adopt(self, state: DEMState) -> DEMState:
+        """``state`` with its neighbour list in this DEM's pair order (jittable): a state made
+        by a DEM of the other contact kernel (whose lists are in the other order, see
+        :mod:`drumheat.mechanics.neighbors`) gets the same pairs re-sorted, their springs and
+        per-pair data carried with them; a state in this order comes back as it is."""
+        if (state.nbrs.order is None) == self.neighbor.index_order:
+            return state
+        nb, n = self.neighbor, self.particles.n
+        order = None if nb.index_order else nb.layout_order(state.nbrs.reference_position,
+                                                             state.nbrs.idx)
+        new = sort_pairs(dataclasses.replace(state.nbrs, order=order), n, order)
+        return _carry_pairs(state, new, n)
 
     def reallocate(self, state: DEMState, pair_capacity: int = 0, extra_cell_capacity: int = 0):
         """A new neighbour list at the state's positions (larger buffers); springs carried over."""
@@ -363,12 +388,7 @@ class DEM:
             raise NeighborListError(
                 f"neighbour list still overflows after reallocation (pairs {count}, capacity "
                 f"{target}, cell capacity {new.cell_list_capacity})", state)
-        source = pair_sources(state.nbrs.idx, new.idx, n, old_sorted=True)  # found once
-        remap = lambda a: take_pair_data(a, source)  # noqa: E731
-        pdata = pair_extra(state.extra)
-        extra = state.extra if pdata is None else state.extra.with_pair_arrays(
-            remap_pair_extra(type(state.extra), pdata, remap))
-        return state._replace(nbrs=new, pair_spring=remap(state.pair_spring), extra=extra)
+        return _carry_pairs(state, new, n)
 
     def run(self, state: DEMState, n_steps: int, chunk: Optional[int] = None,
             callback: Optional[Callable] = None, max_reallocations: int = 8,
@@ -390,6 +410,7 @@ class DEM:
         docs/performance.md, GPU).
         """
         chunk = int(chunk or self.default_chunk)
+        state = self.adopt(state)
         donate = bool(donate)
         owned = False  # whether `state`'s buffers are this loop's own (not the caller's)
         done = 0
@@ -692,7 +713,7 @@ def _checked_time_step(mass, params, dt, safety_factor, rotation):
 
 
 def _neighbour_domain(walls, dim, radius, skin, gap_cut, bounds, periodic_length,
-                      capacity_multiplier, builder="jax"):
+                      capacity_multiplier, builder="jax", pair_order="index"):
     """``(neighbour setup, cell-capacity floor, escape box lo, hi)`` of a DEM domain.
 
     The neighbour cutoff is ``2 r_max + skin`` plus the conduction gap (pairs that conduct
@@ -717,7 +738,7 @@ def _neighbour_domain(walls, dim, radius, skin, gap_cut, bounds, periodic_length
                          f"hi={hi}); pass bounds=(lo, hi) or periodic_length")
     margin = 2.0 * cutoff
     neighbor = make_neighbor_setup(dim, lo - margin, hi + margin, cutoff, skin, periodic_length,
-                                   capacity_multiplier, builder)
+                                   capacity_multiplier, builder, pair_order)
     # cell-list capacity floor: twice the particles of the smallest size that a cell of side
     # `cutoff` holds at the densest packing (hexagonal 0.907 in 2D, fcc 0.74 in 3D), plus one;
     # an estimate from a dilute start (a poured grid) would overflow at once
@@ -799,7 +820,10 @@ def make_dem(
         a faster DEM step on CPU, docs/performance.md; 2D and 3D, float32 and
         float64, any materials, rolling resistance, friction heat; single runs, not under vmap;
         compiled with g++ on first use, ``cpu_kernel.available()`` says whether it can be).
-        Same contact law; results agree with ``"jax"`` to round-off.
+        Same contact law; results agree with ``"jax"`` to round-off. Its neighbour lists are
+        in the cell order (:mod:`drumheat.mechanics.neighbors`, pair order), which keeps its
+        memory reads local however the particles are numbered; the sums then depend on the
+        rebuild times by round-off.
       neighbor_builder: who rebuilds the neighbour list in a run: ``"jax"`` (the cell list in
         XLA) or ``"cpu"`` (one C++ pass, :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`:
         the same pairs in the same order, quicker on XLA:CPU); default ``"cpu"`` with
@@ -857,7 +881,8 @@ def make_dem(
     gap_cut = max(gap_pp, conduction.gap_tolerance if conduction is not None else 0.0)
     neighbor, cell_cap, dom_lo, dom_hi = _neighbour_domain(
         walls, dim, radius_np, skin, gap_cut, bounds, periodic_length, capacity_multiplier,
-        neighbor_builder or ("cpu" if pair_kernel == "cpu" else "jax"))
+        neighbor_builder or ("cpu" if pair_kernel == "cpu" else "jax"),
+        "cell" if pair_kernel == "cpu" else "index")
     periodic_axis = dim - 1 if periodic_length is not None else None
 
     dtype = jnp.dtype(dtype)

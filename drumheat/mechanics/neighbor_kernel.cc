@@ -2,9 +2,14 @@
 // `neighbor_pairs`), the C++ twin of drumheat.mechanics.neighbors.CellGrid.build followed by
 // sort_pairs and the pair-identity search of remap_pair_data.
 //
-// It finds the same pairs as CellGrid.build, pair for pair, and writes them in the canonical
-// order of sort_pairs (by i (N+1) + j, padding N last), so that a run is the same bit for bit
-// whichever of the two builds it. The same arithmetic in the same order as the JAX build:
+// It finds the same pairs as CellGrid.build, pair for pair, and writes them in the order of
+// sort_pairs, so that a run is the same bit for bit whichever of the two builds it: by i (N+1) + j
+// (the canonical order), or with `ranked` in the layout order of NeighborSetup.layout_order:
+// grouped by the first particle i in the order of the particles' cells (CellGrid.order: by flat
+// cell, by index within a cell), j ascending within a group (the order the C++ contact loop
+// takes them in, contact_kernel.cc "Cell order"), unless the particles' own numbering keeps the
+// pairs near enough in memory (numbering_will_do: then canonical, the order 0 .. N-1); padding
+// N last. The same arithmetic in the same order as the JAX build:
 //  * cell of a particle: floor(x_a / size_a) per axis in the dtype of the positions, clipped to
 //    [0, cells_a) (wrapped along a periodic last axis); the flat cell c_0 + c_1 n_0 + c_2 n_0 n_1;
 //  * visited cells: offsets -1, 0, 1 along axes of three or more cells (0 along the others),
@@ -21,10 +26,12 @@
 //
 // Inputs: 0 box-frame positions (N, D) f32 or f64; 1 the old pairs (2, M_old) s32 (padding N).
 // Attributes: n0, n1, n2 cells per axis (n2 = 1 in 2D); s0, s1, s2 their sides (m); cut2 the
-// squared cutoff; L the period of the last axis (0: none); cap the cell capacity.
-// Outputs: 0 pairs (2, M) s32 in canonical order, padded with N; 1 for each new slot the old
-// slot of the same pair, or -1 (new pair, padding); 2 pairs found (1) s32; 3 the most particles
-// in one cell (1) s32.
+// squared cutoff; L the period of the last axis (0: none); cap the cell capacity; ranked (1: the
+// pairs in the layout order, 0: canonical order).
+// Outputs: 0 pairs (2, M) s32 in that order, padded with N; 1 for each new slot the old slot of
+// the same pair, or -1 (new pair, padding); 2 pairs found (1) s32; 3 the most particles in one
+// cell (1) s32; 4 the layout order (N) s32: the particles in the order of their cells, or
+// 0 .. N-1 (the numbering will do, or not `ranked`).
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -48,6 +55,25 @@ inline int64_t cell_of(S x, S size, int64_t cells, bool wrap) {
   return c < 0 ? 0 : (c >= cells ? cells - 1 : c);
 }
 
+// Whether the particles' own numbering keeps the pairs (i, j) [0, w) of the list P (2, M) near
+// enough in memory that the cell order (order: the particles by cell) is not worth its copies
+// (NeighborSetup.layout_order, the same test): the pairs whose partners lie fewer than NEAR
+// places apart, counted in the numbering and in the cell order; the numbering will do while it
+// has at least half as many as the cell order.
+constexpr int64_t NEAR = 256;
+
+bool numbering_will_do(const int32_t* P, int64_t m, int64_t w, const int32_t* order, int64_t n) {
+  std::vector<int32_t> rank(n);
+  for (int64_t p = 0; p < n; ++p) rank[order[p]] = static_cast<int32_t>(p);
+  int64_t near_numbering = 0, near_cells = 0;
+  for (int64_t k = 0; k < w; ++k) {
+    const int32_t i = P[k], j = P[m + k];
+    near_numbering += std::abs(static_cast<int64_t>(j) - i) < NEAR;
+    near_cells += std::abs(static_cast<int64_t>(rank[j]) - rank[i]) < NEAR;
+  }
+  return 2 * near_numbering >= near_cells;
+}
+
 struct Grid {
   int64_t cells[3];
   double size[3];
@@ -56,8 +82,8 @@ struct Grid {
 };
 
 template <typename S, int D>
-void build(const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m, int64_t* total,
-           int64_t* fullest) {
+void build(const S* x, int64_t n, const Grid& g, bool ranked, int32_t* out, int64_t m,
+           int64_t* total, int64_t* fullest, int32_t* cell_order) {
   const int64_t nc = g.cells[0] * g.cells[1] * g.cells[2];
   const bool periodic = g.L > 0;
   const S size[3] = {S(g.size[0]), S(g.size[1]), S(g.size[2])};
@@ -127,29 +153,67 @@ void build(const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m, int64_
   }
   for (int64_t k = t; k < m; ++k) out[k] = out[m + k] = static_cast<int32_t>(n);  // padding
   *total = t;
+  const int64_t w = std::min(t, m);  // the pairs written, in canonical order
+  if (ranked && !numbering_will_do(out, m, w, order.data(), n)) {  // regroup in the cell order
+    std::vector<int64_t> start(n + 1, 0);  // each particle's first slot
+    for (int64_t k = 0; k < w; ++k) ++start[out[k] + 1];
+    for (int64_t p = 0; p < n; ++p) start[p + 1] += start[p];
+    std::vector<int32_t> old(out, out + w), oldj(out + m, out + m + w);
+    int64_t k = 0;
+    for (int64_t p = 0; p < n; ++p) {
+      const int32_t i = order[p];
+      for (int64_t u = start[i]; u < start[i + 1]; ++u, ++k) {
+        out[k] = old[u];
+        out[m + k] = oldj[u];
+      }
+    }
+  } else {
+    for (int64_t p = 0; p < n; ++p) order[p] = static_cast<int32_t>(p);  // the numbering's
+  }
+  std::copy(order.begin(), order.end(), cell_order);
 }
 
-// for each new slot, the old slot of the same pair or -1 (remap_pair_data's search)
+// for each new slot, the old slot of the same pair or -1 (remap_pair_data's search). The lists
+// made here hold each first particle's pairs together (in either order of build): each
+// particle's run of old slots is found in one pass and searched for j. An old list not so
+// grouped (not made here) is searched by its sorted keys i (N+1) + j instead.
 void sources(const int32_t* old, int64_t mo, const int32_t* nw, int64_t m, int64_t n,
              int32_t* src) {
+  std::vector<int64_t> first(n, -1), past(n, -1);  // particle i's old slots [first, past)
+  bool grouped = true;
+  for (int64_t k = 0; k < mo && grouped; ++k) {
+    const int32_t i = old[k];
+    if (i < 0 || i >= n) continue;  // padding
+    if (first[i] < 0) { first[i] = k; past[i] = k + 1; }
+    else if (past[i] == k) past[i] = k + 1;
+    else grouped = false;
+  }
+  if (grouped) {
+    for (int64_t k = 0; k < m; ++k) {
+      src[k] = -1;
+      const int32_t i = nw[k], j = nw[m + k];
+      if (i < 0 || i >= n) continue;
+      for (int64_t u = first[i]; u >= 0 && u < past[i]; ++u)
+        if (old[mo + u] == j) { src[k] = static_cast<int32_t>(u); break; }
+    }
+    return;
+  }
   auto key = [n](int32_t i, int32_t j) { return static_cast<int64_t>(i) * (n + 1) + j; };
   std::vector<int64_t> ko(mo);
-  bool sorted = true;
+  std::vector<int32_t> perm(mo);
   for (int64_t k = 0; k < mo; ++k) {
     ko[k] = key(old[k], old[mo + k]);
-    if (k > 0 && ko[k] < ko[k - 1]) sorted = false;
+    perm[k] = static_cast<int32_t>(k);
   }
-  std::vector<int32_t> perm(mo);
-  for (int64_t k = 0; k < mo; ++k) perm[k] = static_cast<int32_t>(k);
-  if (!sorted)  // a list not in canonical order (not made here): sort its keys first
-    std::stable_sort(perm.begin(), perm.end(), [&](int32_t a, int32_t b) { return ko[a] < ko[b]; });
-  int64_t u = 0;  // the new list is in canonical order (build): one merge-like pass
+  std::stable_sort(perm.begin(), perm.end(), [&](int32_t a, int32_t b) { return ko[a] < ko[b]; });
+  std::vector<int64_t> ks(mo);
+  for (int64_t k = 0; k < mo; ++k) ks[k] = ko[perm[k]];
   for (int64_t k = 0; k < m; ++k) {
     src[k] = -1;
     if (nw[k] >= n) continue;
     const int64_t kn = key(nw[k], nw[m + k]);
-    while (u < mo && ko[perm[u]] < kn) ++u;
-    if (u < mo && ko[perm[u]] == kn) src[k] = perm[u];
+    const auto it = std::lower_bound(ks.begin(), ks.end(), kn);
+    if (it != ks.end() && *it == kn) src[k] = perm[it - ks.begin()];
   }
 }
 
@@ -157,11 +221,12 @@ void sources(const int32_t* old, int64_t mo, const int32_t* nw, int64_t m, int64
 
 static ffi::Error NeighborsImpl(ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, int64_t n0,
                                 int64_t n1, int64_t n2, double s0, double s1, double s2,
-                                double cut2, double L, int64_t cap,
+                                double cut2, double L, int64_t cap, int32_t ranked,
                                 ffi::ResultBuffer<ffi::S32> pairs,
                                 ffi::ResultBuffer<ffi::S32> src,
                                 ffi::ResultBuffer<ffi::S32> total,
-                                ffi::ResultBuffer<ffi::S32> fullest) {
+                                ffi::ResultBuffer<ffi::S32> fullest,
+                                ffi::ResultBuffer<ffi::S32> cell_order) {
   const auto pd = pos.dimensions();
   if (pd.size() != 2 || (pd[1] != 2 && pd[1] != 3))
     return ffi::Error::InvalidArgument("drumheat_neighbors: positions must be (N, 2) or (N, 3)");
@@ -171,15 +236,18 @@ static ffi::Error NeighborsImpl(ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, i
   const Grid g{{n0, n1, n2}, {s0, s1, s2}, cut2, L, cap};
   int64_t t = 0, f = 0;
   int32_t* out = pairs->typed_data();
+  int32_t* co = cell_order->typed_data();
   const bool f64 = pos.element_type() == ffi::DataType::F64;
   if (!f64 && pos.element_type() != ffi::DataType::F32)
     return ffi::Error::InvalidArgument("drumheat_neighbors: positions must be f32 or f64");
+  const bool rk = ranked != 0;
+  const void* xp = pos.untyped_data();
   if (pd[1] == 3) {
-    if (f64) build<double, 3>(static_cast<const double*>(pos.untyped_data()), n, g, out, m, &t, &f);
-    else build<float, 3>(static_cast<const float*>(pos.untyped_data()), n, g, out, m, &t, &f);
+    if (f64) build<double, 3>(static_cast<const double*>(xp), n, g, rk, out, m, &t, &f, co);
+    else build<float, 3>(static_cast<const float*>(xp), n, g, rk, out, m, &t, &f, co);
   } else {
-    if (f64) build<double, 2>(static_cast<const double*>(pos.untyped_data()), n, g, out, m, &t, &f);
-    else build<float, 2>(static_cast<const float*>(pos.untyped_data()), n, g, out, m, &t, &f);
+    if (f64) build<double, 2>(static_cast<const double*>(xp), n, g, rk, out, m, &t, &f, co);
+    else build<float, 2>(static_cast<const float*>(xp), n, g, rk, out, m, &t, &f, co);
   }
   sources(old.typed_data(), mo, out, m, n, src->typed_data());
   const int64_t big = std::numeric_limits<int32_t>::max();
@@ -194,6 +262,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
         .Attr<int64_t>("n0").Attr<int64_t>("n1").Attr<int64_t>("n2")
         .Attr<double>("s0").Attr<double>("s1").Attr<double>("s2")
-        .Attr<double>("cut2").Attr<double>("L").Attr<int64_t>("cap")
+        .Attr<double>("cut2").Attr<double>("L").Attr<int64_t>("cap").Attr<int32_t>("ranked")
         .Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>()
-        .Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>());
+        .Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>()
+        .Ret<ffi::Buffer<ffi::S32>>());

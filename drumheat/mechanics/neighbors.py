@@ -27,15 +27,24 @@ codes of ``jax_md.partition.NeighborList``, so code written for jax-md's lists r
   3D, measured in docs/performance.md), and importing ``jax_md`` runs compiled code at import
   time (7-8 s of every drumheat start on the development machine). jax-md stays the reference
   the tests compare with.
-* Pair order: after every build the pairs are sorted by ``(i, j)`` (:func:`sort_pairs`), so
-  force sums do not depend on when the list was built.
+* Pair order (:func:`sort_pairs`, ``NeighborSetup.pair_order``): ``"index"``, the canonical
+  order, by ``(i, j)``: force sums then do not depend on when the list was built (an extra
+  rebuild leaves a trajectory unchanged: ensembles rebuild every member together). ``"cell"``,
+  with the C++ contact loop: grouped by the first particle in the order of the particles' cells
+  at the build (:meth:`CellGrid.order`, kept in ``NeighborList.order``), ``j`` ascending within
+  a group. The loop takes the pairs as listed with the particles' data laid out in that order,
+  so it reads memory in the order of the particles' places however they are numbered (a turning
+  bed mixes its numbering; docs/performance.md, the particles' order in memory); the sums then
+  depend on the cell order of the last build (round-off). While the particles' own numbering
+  keeps neighbours near in memory (a poured bed) the list stays canonical and ``order`` is
+  ``0 .. N-1`` (:meth:`NeighborSetup.layout_order`): the copies would cost more than they save.
 * History across rebuilds: after a rebuild, :func:`remap_pair_data` finds every new pair in the
-  old pair list (a binary search on ``(i, j)`` in the sorted old list, int32) and carries its
+  old pair list (a binary search on ``(i, j)`` in the old list sorted, int32) and carries its
   data over; new pairs start with zero history (:func:`pair_sources` finds,
   :func:`take_pair_data` carries).
 * On CPU with the C++ contact loop the rebuild of a run is one C++ pass
   (``NeighborSetup(builder="cpu")``, :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`):
-  the same pairs in the same canonical order and the same sources, quicker than the XLA build
+  the same pairs in the same order and the same sources, quicker than the XLA build
   (docs/performance.md); allocations stay in XLA.
 """
 
@@ -156,22 +165,36 @@ def remap_pair_data(old_idx, old_data, new_idx, n, old_sorted: bool = False):
     return take_pair_data(old_data, pair_sources(old_idx, new_idx, n, old_sorted))
 
 
-def sort_pairs(nbrs, n):
-    """The neighbour list with its pairs in canonical order (by ``(i, j)``, padding last).
+def sort_pairs(nbrs, n, order=None):
+    """The neighbour list with its pairs in canonical order (by ``(i, j)``, padding last), or
+    with ``order`` (the particles in the order of their cells, :meth:`CellGrid.order`) grouped
+    by ``i`` in that order, ``j`` ascending within a group, padding last.
 
     A canonical order makes the force sums (``segment_sum`` over the pairs) independent of when
     the list was built: a run that rebuilds every step and one that rebuilds rarely add the
     same non-zero contributions in the same order, so their trajectories agree bit for bit.
-    It also groups each particle's pairs in memory.
+    It also groups each particle's pairs in memory. The cell order (pair order ``"cell"``, the
+    module docstring) puts neighbours' pairs near each other too, for the C++ contact loop.
     """
     import dataclasses
 
     # a sort on the two int32 rows as keys (lexicographic (i, j), the order of the key
     # i (N+1) + j with padding N last): no int64 keys or permutation; the rows stacked (not
     # one sort of idx): XLA:CPU then keeps idx row-major, the layout of the scan carry
-    i, j = jax.lax.sort((nbrs.idx[0], nbrs.idx[1]), num_keys=2)
+    if order is None:
+        i, j = jax.lax.sort((nbrs.idx[0], nbrs.idx[1]), num_keys=2)
+    else:  # keys (rank of i, j), the padding's rank N
+        rank = jnp.full(n + 1, n, jnp.int32).at[order].set(jnp.arange(n, dtype=jnp.int32))
+        _, j, i = jax.lax.sort((rank[nbrs.idx[0]], nbrs.idx[1], nbrs.idx[0]), num_keys=2)
     # the barrier makes every later use read the stacked rows, so the sorted ones die here
     return dataclasses.replace(nbrs, idx=jax.lax.optimization_barrier(jnp.stack([i, j])))
+
+
+#: places apart in memory within which two partners count as near (:meth:`NeighborSetup.
+#: layout_order`): 256 particles' data (positions, velocities, spins, radius, mass, moment of
+#: inertia, temperature: about 100 bytes each in float64) fill about a core's 32 kB first-level
+#: data cache
+NEAR = 256
 
 
 class PEC:
@@ -194,7 +217,7 @@ class ListError:
 
 
 @partial(jax.tree_util.register_dataclass,
-         data_fields=["idx", "reference_position", "error"],
+         data_fields=["idx", "reference_position", "error", "order"],
          meta_fields=["cell_list_capacity", "max_occupancy", "cell_size"])
 @dataclass(frozen=True)
 class NeighborList:
@@ -204,6 +227,11 @@ class NeighborList:
       idx: (2, capacity) int32 pairs ``(i, j)``, ``i < j``, padded with N.
       reference_position: box-frame positions at the last build (the skin criterion).
       error: :class:`ListError`, overflows since the last allocation.
+      order: None (pair order ``"index"``), or (N,) int32 the layout order of the last build
+        (pair order ``"cell"``, :meth:`NeighborSetup.layout_order`: the particles in the order
+        of their cells, or ``0 .. N-1`` while their numbering will do): the pairs are grouped
+        by their first particle in this order, and the C++ contact loop lays the particles'
+        data out in it (``cpu_kernel.contacts``).
       cell_list_capacity: particles one cell may hold (static).
       max_occupancy: pair capacity, ``idx.shape[1]`` (static).
       cell_size: the cutoff the cells are built for, m (static).
@@ -212,6 +240,7 @@ class NeighborList:
     idx: jax.Array
     reference_position: jax.Array
     error: ListError
+    order: Optional[jax.Array]
     cell_list_capacity: int
     max_occupancy: int
     cell_size: float
@@ -267,6 +296,12 @@ class CellGrid:
         mult = np.cumprod((1,) + tuple(self.cells[:-1])).astype(np.int32)
         return jnp.sum(coords * jnp.asarray(mult), axis=-1)
 
+    def order(self, position):
+        """The particles (N,) int32 in the order of their cells: by flat cell number of the
+        box-frame ``position`` (:meth:`cell_index`), by index within a cell (the order of the
+        cell list, and of the C++ build's)."""
+        return jnp.argsort(self.flat(self.cell_index(position)), stable=True).astype(jnp.int32)
+
     def occupancy(self, cell):
         """``(flat cell number of each particle (N,), particles per cell (n_cells,))`` of cell
         coordinates :meth:`cell_index`."""
@@ -285,7 +320,7 @@ class CellGrid:
         n = position.shape[0]
         cell = self.cell_index(position)
         key, count = self.occupancy(cell)
-        order = jnp.argsort(key).astype(jnp.int32)
+        order = jnp.argsort(key, stable=True).astype(jnp.int32)
         start = jnp.searchsorted(key[order], jnp.arange(self.n_cells, dtype=key.dtype),
                                  side="left").astype(jnp.int32)
         sorted_pos = position[order]
@@ -358,7 +393,9 @@ class NeighborSetup:
       displacement: minimum-image displacement; grid: the :class:`CellGrid` that builds;
       builder: who rebuilds in a run (:meth:`rebuild_with_sources`): ``"jax"`` (the
       :class:`CellGrid`, every backend) or ``"cpu"`` (the same pairs from one C++ pass,
-      :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`; with the C++ contact loop).
+      :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`; with the C++ contact loop);
+      pair_order: ``"index"`` (canonical) or ``"cell"`` (grouped in the cell order, for the C++
+      contact loop; the lists carry ``order``): the module docstring.
     """
 
     dim: int
@@ -371,6 +408,7 @@ class NeighborSetup:
     displacement: Callable
     grid: CellGrid
     builder: str = "jax"
+    pair_order: str = "index"
 
     def to_box(self, position):
         """Positions in the box frame (shifted by ``-lo``)."""
@@ -383,8 +421,36 @@ class NeighborSetup:
         capacity = idx.shape[1]
         error = error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > capacity)
         error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > cell_capacity)
-        return sort_pairs(NeighborList(idx, pos, error, int(cell_capacity), int(capacity),
-                                       self.cutoff), pos.shape[0])
+        order = self.layout_order(pos, idx) if self.pair_order == "cell" else None
+        return sort_pairs(NeighborList(idx, pos, error, order, int(cell_capacity),
+                                       int(capacity), self.cutoff), pos.shape[0], order)
+
+    def layout_order(self, pos, idx):
+        """The order (N,) int32 in which the C++ contact loop lays out the particles of the
+        pairs ``idx`` (2, M; padding N; any order) at box-frame ``pos`` (pair order ``"cell"``):
+        the order of their cells (:meth:`CellGrid.order`), unless the particles' own numbering
+        keeps the pairs near enough in memory, then ``0 .. N-1`` (no copies; the pairs in
+        canonical order). Near: the pairs whose partners lie fewer than :data:`NEAR` places
+        apart, about the particles whose data fill a core's first-level cache; the numbering
+        will do while it has at least half as many as the cell order (the poured beds of
+        glass-drum-3d have 0.7 times as many at N = 10 000 and 50 000, the same beds numbered at
+        random 0.08 and 0.02: docs/performance.md). ``neighbor_kernel.cc``
+        (``numbering_will_do``) decides alike."""
+        n = pos.shape[0]
+        cells = self.grid.order(pos)
+        rank = jnp.zeros(n, jnp.int32).at[cells].set(jnp.arange(n, dtype=jnp.int32))
+        i, j = idx[0], idx[1]
+        valid = i < n
+        ri, rj = rank[jnp.where(valid, i, 0)], rank[jnp.where(valid, j, 0)]
+        near_numbering = jnp.sum(valid & (jnp.abs(j - i) < NEAR))
+        near_cells = jnp.sum(valid & (jnp.abs(rj - ri) < NEAR))
+        return jnp.where(2 * near_numbering >= near_cells, jnp.arange(n, dtype=jnp.int32), cells)
+
+    @property
+    def index_order(self) -> bool:
+        """Whether the lists are in canonical order (pair order ``"index"``): the remap of
+        per-pair data can then skip sorting the old list (:func:`pair_sources`)."""
+        return self.pair_order == "index"
 
     def allocate(self, position, min_capacity: int = 0, min_cell_capacity: int = 0):
         """Allocate a neighbour list at ``position`` (not jittable: it sizes the buffers).
@@ -420,18 +486,19 @@ class NeighborSetup:
         in the same order (``tests/test_neighbors_cpu.py`` holds the two equal)."""
         if self.builder != "cpu":
             new = self.rebuild(position, nbrs)
-            return new, pair_sources(nbrs.idx, new.idx, position.shape[0], old_sorted=True)
+            return new, pair_sources(nbrs.idx, new.idx, position.shape[0],
+                                     old_sorted=nbrs.order is None)
         from drumheat.mechanics.cpu_kernel import neighbor_pairs
 
         pos = self.to_box(position)
         g = self.grid
-        idx, src, total, fullest = neighbor_pairs(
+        idx, src, total, fullest, order = neighbor_pairs(
             pos, nbrs.idx, nbrs.max_occupancy, g.cells, g.cell_size, g.cutoff,
-            self.periodic_length, nbrs.cell_list_capacity)
+            self.periodic_length, nbrs.cell_list_capacity, ranked=not self.index_order)
         error = nbrs.error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > nbrs.max_occupancy)
         error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > nbrs.cell_list_capacity)
-        return NeighborList(idx, pos, error, nbrs.cell_list_capacity, nbrs.max_occupancy,
-                            self.cutoff), src
+        return NeighborList(idx, pos, error, None if self.index_order else order,
+                            nbrs.cell_list_capacity, nbrs.max_occupancy, self.cutoff), src
 
     def max_displacement_sq(self, position, nbrs):
         """Largest squared displacement (m^2) of any particle since the last build."""
@@ -455,9 +522,10 @@ def _build(grid: CellGrid, pos, capacity: int, cell_capacity: int):
 
 
 def make_neighbor_setup(dim, lo, hi, cutoff, skin, periodic_length=None,
-                        capacity_multiplier=1.5, builder="jax") -> NeighborSetup:
+                        capacity_multiplier=1.5, builder="jax",
+                        pair_order="index") -> NeighborSetup:
     """Neighbour search for the box ``[lo, hi]`` (m); along a periodic axis ``[0, L)``;
-    ``builder``: see :class:`NeighborSetup`."""
+    ``builder``, ``pair_order``: see :class:`NeighborSetup`."""
     lo = np.asarray(lo, dtype=float).copy()
     hi = np.asarray(hi, dtype=float).copy()
     if periodic_length is not None:
@@ -469,5 +537,7 @@ def make_neighbor_setup(dim, lo, hi, cutoff, skin, periodic_length=None,
     grid = make_cell_grid(dim, box, float(cutoff), periodic_length, disp)
     if builder not in ("jax", "cpu"):
         raise ValueError(f"neighbour builder must be 'jax' or 'cpu', got {builder!r}")
+    if pair_order not in ("index", "cell"):
+        raise ValueError(f"pair order must be 'index' or 'cell', got {pair_order!r}")
     return NeighborSetup(dim, lo, box, periodic_length, float(cutoff), float(skin),
-                         float(capacity_multiplier), disp, grid, builder)
+                         float(capacity_multiplier), disp, grid, builder, pair_order)
