@@ -257,7 +257,7 @@ class DEM:
     particles, params, neighbor (NeighborSetup), dtype, gravity (m/s^2 vector),
     max_overlap (fraction of the smaller radius that stops a run).
     Functions: :meth:`init`, :meth:`step`, :meth:`run`, :meth:`run_steps`, :meth:`contacts`,
-    :meth:`energies`, :meth:`reallocate`.
+    :meth:`energies`, :meth:`reallocate`, :meth:`adopt`.
 
     ``step_fn(state) -> (state, contacts)`` and ``run_steps_fn(state, n_steps) -> state`` are
     the same functions un-jitted, for composing them into a larger program (``vmap`` over an

@@ -517,10 +517,14 @@ class DEMBed(DEMMotion):
     def advance_batch(self, states, axes, t0, t1):
         if self._batched is None:
             dem = self.make_dem(self.model()[0], batch_axis=BATCH_AXIS)
-            self._batched = jax.jit(jax.vmap(dem.run_steps_fn, in_axes=(0, None),
-                                             axis_name=BATCH_AXIS), compiler_options=JIT_OPTIONS)
-        start = jax.vmap(lambda s: self._start(s, t0))(states)
-        return self._batched(start, jnp.asarray(self._steps(t0, t1, self.dt), jnp.int32))
+            self._batched = (dem, jax.jit(jax.vmap(dem.run_steps_fn, in_axes=(0, None),
+                                                   axis_name=BATCH_AXIS),
+                                          compiler_options=JIT_OPTIONS))
+        dem, run = self._batched
+        # the variants' states come from the single-run DEM, whose C++ loop may keep its lists
+        # in the cell order: the batched DEM (the JAX kernel) takes them in canonical order
+        start = jax.vmap(lambda s: dem.adopt(self._start(s, t0)))(states)
+        return run(start, jnp.asarray(self._steps(t0, t1, self.dt), jnp.int32))
 
     def check_batch(self, start, end, n: int, unstack, stack, attempt: int = 0):
         """All variants share one neighbour capacity: an overflow in any reallocates all and
