@@ -18,16 +18,24 @@ slowly). Two measurements:
 * ``--frame FILE:K``: the first measurement on the positions of output K of a run's
   ``particles.npz`` instead of the pour (a bed numbered as a long run has mixed it; given to the
   scene as a packing, at rest), to tell what the numbering costs at that point of a run.
+* ``--layouts FILE:K1,K2,...``: the two layouts of the C++ loop on the same state, for each
+  output K of a run's ``particles.npz`` (at rest, 300 steps as above): the list in canonical
+  order (the particles' own numbering, order 0 .. N-1) and in the cell order
+  (``NeighborList.order``), their contact calls alternating (``--repeat`` loops of 100 calls
+  each; median and best), beside the pairs near in memory in each (``NeighborSetup.near_pairs``)
+  and which layout ``layout_order`` takes: to tell where along a run the switch pays.
 
 Usage: python scripts/bench_particle_order.py [--n 10000] [--orders asis random morton]
        python scripts/bench_particle_order.py --n 10000 --revolutions 1.2 [--chunk 20000]
        python scripts/bench_particle_order.py --n 10000 --frame results/drum/particles.npz:25
+       python scripts/bench_particle_order.py --n 10000 --layouts results/drum/particles.npz:0,9,25
 The packings are cached in ``--packing-cache`` (bench_vs_liggghts.py's).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -39,6 +47,9 @@ import numpy as np
 from bench_vs_liggghts import D_P, scene_for, scene_packing
 from machine import cpu_ticks, steal_percent
 from profile_scene_step import loops, timed
+
+from drumheat.mechanics.integrator import _carry_pairs
+from drumheat.mechanics.neighbors import sort_pairs
 
 
 def morton_order(pos, cell=D_P):
@@ -75,6 +86,54 @@ def frame_positions(spec: str, n: int) -> np.ndarray:
     return pos
 
 
+def bed_state(n, pos, name="bed"):
+    """The scene's motion model on the bed ``pos`` (given as a packing file) and its state
+    after 300 steps from rest."""
+    path = Path(tempfile.mkdtemp()) / f"{name}.npz"
+    np.savez(path, position=pos, diameter=np.full(n, D_P), group=np.zeros(n, int))
+    motion = motion_for(n, path)
+    return motion, motion.dem.run(motion.initial_state(), 300, chunk=300)
+
+
+def layouts(n, spec, repeat):
+    """For each output K of ``spec`` (``FILE:K1,K2,...``): the contact call with the list in
+    canonical order and in the cell order, on the same state (module docstring)."""
+    path, ks = spec.rsplit(":", 1)
+    with np.load(path) as f:
+        times = np.asarray(f["t"], float)
+    print("| output | t (s) | median abs(i - j) | near pairs, numbering / cell order | layout taken "
+          "| contact call, canonical (ms): median, best | cell order | canonical / cell order "
+          "(medians) | steal |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for k in (int(x) for x in ks.split(",")):
+        motion, state = bed_state(n, frame_positions(f"{path}:{k}", n), f"frame{k}")
+        dem = motion.dem
+        nb = dem.neighbor
+        near_num, near_cell, cells = nb.near_pairs(nb.to_box(state.position), state.nbrs.idx)
+        taken = "cell" if state.nbrs.order is not None and not bool(
+            jnp.all(state.nbrs.order == jnp.arange(n))) else "canonical"
+        states = {}
+        for name, order in (("canonical", jnp.arange(n, dtype=jnp.int32)), ("cell", cells)):
+            new = sort_pairs(dataclasses.replace(state.nbrs, order=order), n, order)
+            states[name] = _carry_pairs(state, new, n)
+        call, calls = loops(dem)["contact"], jnp.asarray(100, jnp.int32)
+        ms = {name: [] for name in states}
+        for s in states.values():
+            jax.block_until_ready(call(s, calls))
+        c0 = cpu_ticks()
+        for _ in range(repeat):
+            for name, s in states.items():
+                t0 = time.perf_counter()
+                jax.block_until_ready(call(s, calls))
+                ms[name].append(10.0 * (time.perf_counter() - t0))
+        med = {name: float(np.median(v)) for name, v in ms.items()}
+        print(f"| {k} | {times[k]:g} | {locality(state, n):.0f} | {int(near_num) / n:.2f} / "
+              f"{int(near_cell) / n:.2f} per particle | {taken} | {med['canonical']:.3f}, "
+              f"{min(ms['canonical']):.3f} | {med['cell']:.3f}, {min(ms['cell']):.3f} | "
+              f"{med['canonical'] / med['cell']:.2f} | "
+              f"{steal_percent(c0, cpu_ticks()):.0f} % |", flush=True)
+
+
 def orders(n, names, cache, frame=None):
     if frame is None:
         with np.load(scene_packing(n, cache)) as f:
@@ -83,16 +142,11 @@ def orders(n, names, cache, frame=None):
         pos = frame_positions(frame, n)
     perms = {"asis": np.arange(n), "random": np.random.default_rng(0).permutation(n),
              "morton": morton_order(pos)}
-    tmp = Path(tempfile.mkdtemp())
     print(f"| N | order | median abs(i - j) | contact call (ms) | run (particle-steps/s) | steal |")
     print("|---|---|---|---|---|---|")
     for name in names:
-        path = tmp / f"{name}.npz"
-        np.savez(path, position=pos[perms[name]], diameter=np.full(n, D_P),
-                 group=np.zeros(n, int))
-        motion = motion_for(n, path)
+        motion, state = bed_state(n, pos[perms[name]], name)
         dem = motion.dem
-        state = dem.run(motion.initial_state(), 300, chunk=300)
         c0 = cpu_ticks()
         best = timed(loops(dem)["contact"], state, jnp.asarray(200, jnp.int32), repeat=7)[0]
         t0 = time.perf_counter()
@@ -126,8 +180,14 @@ def main():
     ap.add_argument("--chunk", type=int, default=20000)
     ap.add_argument("--packing-cache", default="/tmp/drumheat_packings")
     ap.add_argument("--frame", metavar="FILE:K", help="start from output K of a particles.npz")
+    ap.add_argument("--layouts", metavar="FILE:K1,K2,...",
+                    help="the two layouts on the beds of these outputs of a particles.npz")
+    ap.add_argument("--repeat", type=int, default=9,
+                    help="alternating loops of 100 contact calls per layout (--layouts)")
     args = ap.parse_args()
-    if args.revolutions > 0:
+    if args.layouts:
+        layouts(args.n, args.layouts, args.repeat)
+    elif args.revolutions > 0:
         revolutions(args.n, args.revolutions, args.chunk, args.packing_cache)
     else:
         orders(args.n, args.orders, args.packing_cache, args.frame)

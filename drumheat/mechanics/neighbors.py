@@ -436,15 +436,24 @@ class NeighborSetup:
         glass-drum-3d have 0.7 times as many at N = 10 000 and 50 000, the same beds numbered at
         random 0.08 and 0.02: docs/performance.md). ``neighbor_kernel.cc``
         (``numbering_will_do``) decides alike."""
+        near_numbering, near_cells, cells = self.near_pairs(pos, idx)
+        n = pos.shape[0]
+        return jnp.where(2 * near_numbering >= near_cells, jnp.arange(n, dtype=jnp.int32), cells)
+
+    def near_pairs(self, pos, idx):
+        """``(near in the numbering, near in the cell order, cell order)`` of the pairs ``idx``
+        (2, M; padding N) at box-frame ``pos`` (jittable): how many pairs have partners fewer
+        than :data:`NEAR` places apart in the particles' own numbering and in the order of
+        their cells (:meth:`CellGrid.order`, the third item), which :meth:`layout_order`
+        compares."""
         n = pos.shape[0]
         cells = self.grid.order(pos)
         rank = jnp.zeros(n, jnp.int32).at[cells].set(jnp.arange(n, dtype=jnp.int32))
         i, j = idx[0], idx[1]
         valid = i < n
         ri, rj = rank[jnp.where(valid, i, 0)], rank[jnp.where(valid, j, 0)]
-        near_numbering = jnp.sum(valid & (jnp.abs(j - i) < NEAR))
-        near_cells = jnp.sum(valid & (jnp.abs(rj - ri) < NEAR))
-        return jnp.where(2 * near_numbering >= near_cells, jnp.arange(n, dtype=jnp.int32), cells)
+        return (jnp.sum(valid & (jnp.abs(j - i) < NEAR)),
+                jnp.sum(valid & (jnp.abs(rj - ri) < NEAR)), cells)
 
     @property
     def index_order(self) -> bool:
