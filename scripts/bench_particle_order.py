@@ -24,11 +24,15 @@ slowly). Two measurements:
   (``NeighborList.order``), their contact calls alternating (``--repeat`` loops of 100 calls
   each; median and best), beside the pairs near in memory in each (``NeighborSetup.near_pairs``)
   and which layout ``layout_order`` takes: to tell where along a run the switch pays.
+* ``--diffuse S1,S2,...``: the same on the poured bed renumbered as by diffusion over S places
+  (the particles sorted by index plus a normal deviate of standard deviation S), a stand-in
+  for the frames of a long run at sizes where such a run takes too long.
 
 Usage: python scripts/bench_particle_order.py [--n 10000] [--orders asis random morton]
        python scripts/bench_particle_order.py --n 10000 --revolutions 1.2 [--chunk 20000]
        python scripts/bench_particle_order.py --n 10000 --frame results/drum/particles.npz:25
        python scripts/bench_particle_order.py --n 10000 --layouts results/drum/particles.npz:0,9,25
+       python scripts/bench_particle_order.py --n 50000 --diffuse 100,300,1000
 The packings are cached in ``--packing-cache`` (bench_vs_liggghts.py's).
 """
 
@@ -95,18 +99,37 @@ def bed_state(n, pos, name="bed"):
     return motion, motion.dem.run(motion.initial_state(), 300, chunk=300)
 
 
-def layouts(n, spec, repeat):
-    """For each output K of ``spec`` (``FILE:K1,K2,...``): the contact call with the list in
-    canonical order and in the cell order, on the same state (module docstring)."""
+def frames(spec, n):
+    """``(label, t, positions)`` of the outputs K of ``spec`` (``FILE:K1,K2,...``)."""
     path, ks = spec.rsplit(":", 1)
     with np.load(path) as f:
         times = np.asarray(f["t"], float)
-    print("| output | t (s) | median abs(i - j) | near pairs, numbering / cell order | layout taken "
+    for k in (int(x) for x in ks.split(",")):
+        yield f"output {k}", f"{times[k]:g}", frame_positions(f"{path}:{k}", n)
+
+
+def diffused(spec, n, cache):
+    """``(label, "", positions)`` of the poured bed renumbered as by diffusion over S places for
+    each S of ``spec`` (``S1,S2,...``): the particles sorted by their index plus a normal
+    deviate of standard deviation S, so that partners drift apart by about S sqrt 2 places
+    while the numbering stays locally ordered, as a turning bed mixes it."""
+    with np.load(scene_packing(n, cache)) as f:
+        pos = np.asarray(f["position"], float)
+    rng = np.random.default_rng(0)
+    for sd in (float(x) for x in spec.split(",")):
+        perm = np.argsort(np.arange(n) + rng.normal(0.0, sd, n), kind="stable")
+        yield f"pour, diffused {sd:g}", "", pos[perm]
+
+
+def layouts(n, beds, repeat):
+    """For each ``(label, t, positions)`` of ``beds``: the contact call with the list in
+    canonical order and in the cell order, on the same state (module docstring)."""
+    print("| bed | t (s) | median abs(i - j) | near pairs, numbering / cell order | layout taken "
           "| contact call, canonical (ms): median, best | cell order | canonical / cell order "
           "(medians) | steal |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for k in (int(x) for x in ks.split(",")):
-        motion, state = bed_state(n, frame_positions(f"{path}:{k}", n), f"frame{k}")
+    for label, t, pos in beds:
+        motion, state = bed_state(n, pos, "bed")
         dem = motion.dem
         nb = dem.neighbor
         near_num, near_cell, cells = nb.near_pairs(nb.to_box(state.position), state.nbrs.idx)
@@ -127,7 +150,7 @@ def layouts(n, spec, repeat):
                 jax.block_until_ready(call(s, calls))
                 ms[name].append(10.0 * (time.perf_counter() - t0))
         med = {name: float(np.median(v)) for name, v in ms.items()}
-        print(f"| {k} | {times[k]:g} | {locality(state, n):.0f} | {int(near_num) / n:.2f} / "
+        print(f"| {label} | {t} | {locality(state, n):.0f} | {int(near_num) / n:.2f} / "
               f"{int(near_cell) / n:.2f} per particle | {taken} | {med['canonical']:.3f}, "
               f"{min(ms['canonical']):.3f} | {med['cell']:.3f}, {min(ms['cell']):.3f} | "
               f"{med['canonical'] / med['cell']:.2f} | "
@@ -182,11 +205,17 @@ def main():
     ap.add_argument("--frame", metavar="FILE:K", help="start from output K of a particles.npz")
     ap.add_argument("--layouts", metavar="FILE:K1,K2,...",
                     help="the two layouts on the beds of these outputs of a particles.npz")
+    ap.add_argument("--diffuse", metavar="S1,S2,...",
+                    help="the two layouts on the poured bed renumbered as by diffusion over S "
+                         "places")
     ap.add_argument("--repeat", type=int, default=9,
-                    help="alternating loops of 100 contact calls per layout (--layouts)")
+                    help="alternating loops of 100 contact calls per layout (--layouts, "
+                         "--diffuse)")
     args = ap.parse_args()
     if args.layouts:
-        layouts(args.n, args.layouts, args.repeat)
+        layouts(args.n, frames(args.layouts, args.n), args.repeat)
+    elif args.diffuse:
+        layouts(args.n, diffused(args.diffuse, args.n, args.packing_cache), args.repeat)
     elif args.revolutions > 0:
         revolutions(args.n, args.revolutions, args.chunk, args.packing_cache)
     else:
