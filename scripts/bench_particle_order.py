@@ -2,10 +2,11 @@
 
 The contact loop reads the data of both partners of every listed pair; how far apart in memory
 neighbours lie decides how often that misses the cache. Since 2026-11-27 the C++ loop's lists
-are in the cell order (``NeighborList.order``: the pairs grouped in the order of the particles'
-cells, the particles' data laid out in it), so the particles' numbering should no longer
-matter; this script shows whether it does (before, a bed numbered at random ran up to twice as
-slowly). Two measurements:
+go over to the cell order (``NeighborList.order``: the pairs grouped in the order of the
+particles' cells, the particles' data laid out in it) once the particles' numbering has fewer
+than half as many pairs near in memory as that order (``NeighborSetup.layout_order``); this
+script shows what the numbering and the two layouts cost (before, a bed numbered at random ran
+up to twice as slowly). Its measurements:
 
 * ``--orders asis random morton`` (default): the scene's poured bed at N (the pour numbers the
   particles by height, as it fills the insertion sites lowest first), the same bed with the
@@ -112,7 +113,7 @@ def diffused(spec, n, cache):
     """``(label, "", positions)`` of the poured bed renumbered as by diffusion over S places for
     each S of ``spec`` (``S1,S2,...``): the particles sorted by their index plus a normal
     deviate of standard deviation S, so that partners drift apart by about S sqrt 2 places
-    while the numbering stays locally ordered, as a turning bed mixes it."""
+    while the numbering stays locally ordered: a stand-in for a turning bed's mixing."""
     with np.load(scene_packing(n, cache)) as f:
         pos = np.asarray(f["position"], float)
     rng = np.random.default_rng(0)
