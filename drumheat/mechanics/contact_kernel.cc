@@ -894,6 +894,11 @@ bool identity(const int32_t* order, int64_t n) {
   return off == 0;
 }
 
+// whether the cell order `order` (null: none) lays the data out: given and not 0 .. N-1
+bool layout_in_use(const int32_t* order, int64_t n) {
+  return order != nullptr && !identity(order, n);
+}
+
 // each particle's rank in `order` into rk (N); false if `order` is not a permutation of 0 .. N-1
 bool ranks(const int32_t* order, int64_t n, int32_t* rk) {
   std::memset(rk, 0xff, sizeof(int32_t) * n);  // -1: no rank yet
@@ -938,7 +943,7 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   // the neighbour build), the chunks are ranges of ranks and sum at the ranks, every chunk into
   // its own buffer, and the sums are put back in the particles' numbering at the end; without,
   // chunk 0 sums into the outputs
-  const bool ranked = a.order != nullptr && !identity(a.order, n);
+  const bool ranked = layout_in_use(a.order, n);
   const Layout<S, D> layout(n);
   std::unique_ptr<Buffer> lay;
   if (ranked) {
@@ -1085,7 +1090,7 @@ bool heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
   std::memset(E0, 0, sizeof(double) * n);
   S0[0] = S0[1] = 0.0;
   // the chunks as the first pass cuts them
-  const bool ranked = a.order != nullptr && !identity(a.order, n);
+  const bool ranked = layout_in_use(a.order, n);
   std::vector<int32_t> rk(ranked ? n : 0);
   if (ranked && !ranks(a.order, n, rk.data())) return false;
   const Chunks ch = chunks(pool, P, n, m, nw, ranked ? rk.data() : nullptr);

@@ -16,10 +16,12 @@ most one per 8 000 listed pairs; ``DRUMHEAT_KERNEL_THREADS`` sets the number), e
 particles with their pairs (the list is grouped by the first particle), and run on that
 pool, so no threads are started per step; each chunk sums into its own buffer and the buffers
 are added in chunk order, so the result depends on the chunk count by round-off and on nothing
-else. The lists of such runs are in the cell order (``NeighborList.order``,
-:mod:`drumheat.mechanics.neighbors`): the loop lays the particles' data out in that order and
-takes the pairs as listed, so that it reads memory in the order of the particles' places
-however they are numbered (a turning bed mixes its numbering; docs/performance.md). The pair and wall springs are updated in place (aliased buffers). Speed:
+else. Once the particles' numbering has lost most of its pairs near in memory (a mixed bed),
+the lists of such runs go over to the cell order (``NeighborList.order``,
+:mod:`drumheat.mechanics.neighbors`): the loop then lays the particles' data out in that order
+and takes the pairs as listed, so that it reads memory in the order of the particles' places
+(what that is worth: docs/performance.md). The pair and wall springs are updated in place
+(aliased buffers). Speed:
 docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
 ``scripts/bench_vs_liggghts.py`` the whole step against LIGGGHTS).
 
@@ -364,10 +366,15 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         jnp.asarray(ptype).astype(jnp.int32), idx.astype(jnp.int32), c(spring),
         c(wall_distance), c(wall_normal), c(wall_velocity), c(wall_spring), c(tables_pp),
         c(tables_pw), c(wall_omega), temperature.astype(jnp.float64), c(wd0),
-        jnp.zeros((0,), jnp.int32) if order is None else jnp.asarray(order, jnp.int32),
+        _order_arg(order),
         dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
         h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
         rot=np.int32(bool(rotation)), fh=np.int32(fh), cgap=np.float64(pair_gap))
+
+
+def _order_arg(order):
+    """The cell order as the library takes it: (N,) int32, or length 0 for none."""
+    return jnp.zeros((0,), jnp.int32) if order is None else jnp.asarray(order, jnp.int32)
 
 
 def contact_heat(vel, omega, idx, pair_rows, wall_rows, wall_velocity, wall_omega, dt,
@@ -393,7 +400,7 @@ def contact_heat(vel, omega, idx, pair_rows, wall_rows, wall_velocity, wall_omeg
     return jax.ffi.ffi_call(HEAT_TARGET, [sd((n,), jnp.float64), sd((2,), jnp.float64)])(
         vel, c(omega).reshape((n, 3) if dim == 3 else (n,)), idx.astype(jnp.int32),
         pair_rows, wall_rows, c(wall_velocity), c(wall_omega), k,
-        jnp.zeros((0,), jnp.int32) if order is None else jnp.asarray(order, jnp.int32),
+        _order_arg(order),
         dt=np.float64(dt), kw=np.float64(wall_conductivity))
 
 

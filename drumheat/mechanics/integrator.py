@@ -820,10 +820,11 @@ def make_dem(
         a faster DEM step on CPU, docs/performance.md; 2D and 3D, float32 and
         float64, any materials, rolling resistance, friction heat; single runs, not under vmap;
         compiled with g++ on first use, ``cpu_kernel.available()`` says whether it can be).
-        Same contact law; results agree with ``"jax"`` to round-off. Its neighbour lists are
-        in the cell order (:mod:`drumheat.mechanics.neighbors`, pair order), which keeps its
-        memory reads local however the particles are numbered; the sums then depend on the
-        rebuild times by round-off.
+        Same contact law; results agree with ``"jax"`` to round-off. Its neighbour lists go
+        over to the cell order once the particles' numbering has mixed
+        (:mod:`drumheat.mechanics.neighbors`, pair order), which keeps its memory reads local
+        however the particles are numbered; the sums then depend on the rebuild times by
+        round-off.
       neighbor_builder: who rebuilds the neighbour list in a run: ``"jax"`` (the cell list in
         XLA) or ``"cpu"`` (one C++ pass, :func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`:
         the same pairs in the same order, quicker on XLA:CPU); default ``"cpu"`` with
