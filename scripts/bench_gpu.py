@@ -19,8 +19,11 @@ For each (N, precision) a fresh process builds the motion model (``make_motion``
 ``DEM.run`` (chunked, with its overflow / NaN / escape checks) over enough steps for about
 ``--seconds`` of wall time. Reported: particle-steps/s, neighbour-list rebuilds in the timed
 steps, the device's peak memory (``memory_stats()['peak_bytes_in_use']``, GPU) or the process's
-peak resident memory (CPU), both per particle, and the mean temperature change as a sanity
-check that heat moved.
+peak resident memory (CPU), both per particle, the mean temperature change as a sanity
+check that heat moved, and what the precision resolves (``spacing/dg``: the position spacing at
+the slice's largest coordinate over the overlap under a bead's own weight,
+:mod:`drumheat.mechanics.precision`; float32 reaches 1 from N = 4e4 on, so its rows at 1e5 and
+1e6 time the card, not results to use).
 
 With ``--trace STEPS``, each case then runs ``dem.run_steps`` over STEPS steps under the JAX
 profiler and prints the device's kernels and the host's work summed per step
@@ -155,7 +158,8 @@ def measure(n: int, precision: str, base: Path, seconds: float, warm: int,
                 device_peak_bytes=peak, peak_rss_bytes=rss,
                 bytes_per_particle=(peak if peak else rss) / n,
                 dT_mean=T_after - T_before, finite=bool(np.all(np.isfinite(
-                    np.asarray(out.position)))))
+                    np.asarray(out.position)))),
+                spacing_over_weight_overlap=dem.position_resolution().spacing_over_weight_overlap)
 
 
 def main():
@@ -224,11 +228,17 @@ def main():
         return
     print(f"\ndevice {rows[0]['device']}, JAX {rows[0]['jax']}")
     print(f"{'N':>9} {'precision':>9} {'donate':>6} {'p-steps/s':>10} {'steps':>6} {'wall s':>7} "
-          f"{'rebuilds':>8} {'kB/part':>8} {'set-up s':>8} {'warm s':>7} {'dT_mean K':>10}")
+          f"{'rebuilds':>8} {'kB/part':>8} {'set-up s':>8} {'warm s':>7} {'dT_mean K':>10} "
+          f"{'spacing/dg':>10}")
     for r in rows:
         print(f"{r['n']:>9} {r['precision']:>9} {r['donate']:>6} {r['rate']:>10.3g} {r['steps']:>6} "
               f"{r['wall_s']:>7.1f} {r['rebuilds']:>8} {r['bytes_per_particle'] / 1e3:>8.2f} "
-              f"{r['setup_s']:>8.0f} {r['warm_s']:>7.0f} {r['dT_mean']:>10.3g}")
+              f"{r['setup_s']:>8.0f} {r['warm_s']:>7.0f} {r['dT_mean']:>10.3g} "
+              f"{r.get('spacing_over_weight_overlap') or float('nan'):>10.3g}")
+    print("spacing/dg: the mechanics' position spacing at the slice's largest coordinate over the "
+          "overlap under a bead's own weight (drumheat.mechanics.precision); from 1 on the "
+          "float type cannot resolve a resting contact, and the row times the card, not a "
+          "result to use")
 
 
 if __name__ == "__main__":

@@ -38,18 +38,21 @@ partner is the 2-rank run).
 By default drumheat is timed through the product path, the built-in scene ``glass-drum-3d``
 (the same drum with its own poured packing; k = 1e5 N/m for particles and wall, dt = 0.1
 t_crit = 1.6e-5 s, the coupled heat of the scene: contact times every step, a thermal step every
-10) with ``dem.contact_backend`` = jax and cpu; ``--bespoke`` times the DEM built here from
+10) with ``dem.contact_backend`` = jax and cpu, its mechanics in float64 (``--precision``
+adds float32 rows: speed only, float32 positions resolve this drum coarsely, see
+scripts/precision_drum.py); ``--bespoke`` times the DEM built here from
 the LIGGGHTS packing as before. The step cost per particle is what is compared; the step sizes
 differ (LIGGGHTS 1e-5 s).
 
 Usage: python scripts/bench_vs_liggghts.py [--n 2000 10000 50000] [--steps S] [--quick]
        [--ranks 1 2] [--workdir DIR] [--packings DIR] [--no-liggghts] [--thermal on|off]
-       [--bespoke]
+       [--precision float64 float32] [--bespoke]
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import os
 import re
@@ -199,13 +202,15 @@ def time_drumheat(dat, steps, warm, thermal, pair_kernel="jax"):
     return dict(r, note=extra)
 
 
-def scene_for(n, backend="auto", packing=None):
+def scene_for(n, backend="auto", packing=None, precision="float64"):
     """The built-in scene glass-drum-3d at N particles (its documented knob: depth = N x
-    2.6e-5 m), on the given contact backend; ``packing``: a packing file (``packing.method =
+    2.6e-5 m), on the given contact backend, with the mechanics in ``precision`` (the scene's
+    float64, or float32: ``dem.precision``); ``packing``: a packing file (``packing.method =
     "file"``) instead of the scene's pour."""
     from drumheat.scene import load_scene
 
-    over = {"groups.0.count": n, "drum.depth": n * 2.6e-5, "dem.contact_backend": backend}
+    over = {"groups.0.count": n, "drum.depth": n * 2.6e-5, "dem.contact_backend": backend,
+            "dem.precision": precision}
     if packing is not None:
         over.update({"packing.method": "file", "packing.file": str(packing)})
     return load_scene("glass-drum-3d", over)
@@ -227,15 +232,15 @@ def scene_packing(n, folder):
     return path
 
 
-def time_scene(n, steps, warm, backend="auto", packing=None):
+def time_scene(n, steps, warm, backend="auto", packing=None, precision="float64"):
     """drumheat through the product path: the scene's motion model (``make_motion``), its
     poured initial state (or the ``packing`` file) and its DEM with the coupled heat update
     (contact times every step, a thermal step every ``dem.thermal_substeps``), timed over
-    ``steps`` after ``warm``."""
+    ``steps`` after ``warm``, the mechanics in ``precision``."""
     from drumheat.motion import make_motion
 
     t0 = time.perf_counter()
-    motion = make_motion(scene_for(n, backend, packing))
+    motion = make_motion(scene_for(n, backend, packing, precision))
     state = motion.initial_state()  # pours the bed unless given a packing (not timed)
     t_setup = time.perf_counter() - t0
     _, _, r = timed_steps(motion.dem, state, steps, warm)
@@ -282,6 +287,12 @@ def main():
     ap.add_argument("--pair-kernel", nargs="+", default=["jax", "cpu"], choices=["jax", "cpu"],
                     help="drumheat pair kernels to time: the JAX kernel and/or the C++ loop "
                          "(make_dem(pair_kernel='cpu'), where it is available)")
+    ap.add_argument("--precision", nargs="+", default=["float64"],
+                    choices=["float64", "float32"],
+                    help="the scene's mechanics (dem.precision; temperatures stay float64): "
+                         "float32 resolves positions only coarsely (scripts/precision_drum.py, "
+                         "docs/performance.md), so its rows are speed, not a like-for-like "
+                         "comparison with LIGGGHTS' double precision")
     ap.add_argument("--bespoke", action="store_true",
                     help="time drumheat's DEM built here from the LIGGGHTS packing (the "
                          "earlier path) instead of the built-in scene glass-drum-3d")
@@ -299,7 +310,7 @@ def main():
     thermal = args.thermal == "on"
     globals()["PREP_TIMEOUT"] = args.prep_timeout
     mech = ("float32 mechanics, float64 temperatures (bespoke DEM)" if args.bespoke else
-            "the scene's float64 mechanics and temperatures")
+            f"the scene's mechanics in {' and '.join(args.precision)}, float64 temperatures")
     print(f"jax {jax.__version__} on {jax.devices()[0].platform}; drumheat {mech}; heat "
           f"conduction {args.thermal}; {os.cpu_count()} CPUs")
     rows = []
@@ -311,9 +322,9 @@ def main():
         warm = args.warm or warm
         if not args.bespoke:  # the product path: the built-in scene, each backend
             packing = scene_packing(n, args.packings)
-            for kernel in args.pair_kernel:
-                r = time_scene(n, steps, warm, kernel, packing)
-                code = f"drumheat scene ({r['backend']})"
+            for kernel, precision in itertools.product(args.pair_kernel, args.precision):
+                r = time_scene(n, steps, warm, kernel, packing, precision)
+                code = f"drumheat scene ({r['backend']}, {precision})"
                 rows.append((n, code, "-", steps, r))
                 print(f"  N={n} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
                       f"{r['load']:.2f}, steal {r['steal']:.0f} %, rebuilds {r['rebuilds']}) "

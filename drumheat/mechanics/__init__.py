@@ -5,7 +5,8 @@ JAX or the C++ loop (:mod:`.forces`), neighbour lists with tangential history
 (:mod:`.neighbors`), velocity-Verlet integration with a checked chunked runner
 (:mod:`.integrator`), per-step contact conduction in the force loop (:mod:`.conduction`), the
 opt-in C++ contact kernel for CPUs (:mod:`.cpu_kernel`), bed generation (:mod:`.pour`),
-analysis (:mod:`.analysis`) and the exceptions (:mod:`.errors`).
+analysis (:mod:`.analysis`), what the float type resolves (:mod:`.precision`) and the
+exceptions (:mod:`.errors`).
 """
 
 from drumheat.mechanics.contact_forces import (  # noqa: F401

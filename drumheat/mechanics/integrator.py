@@ -68,6 +68,7 @@ from drumheat.mechanics.errors import (
 from drumheat.mechanics.forces import ContactForces, Contacts, make_contact_forces
 from drumheat.mechanics.neighbors import (PEC, NeighborSetup, make_neighbor_setup, pair_sources,
                                           sort_pairs, take_pair_data)
+from drumheat.mechanics.precision import PositionResolution, position_resolution
 from drumheat.models.soft_sphere import STICKING_CONTACTS, default_time_step
 
 __all__ = [
@@ -257,7 +258,7 @@ class DEM:
     particles, params, neighbor (NeighborSetup), dtype, gravity (m/s^2 vector),
     max_overlap (fraction of the smaller radius that stops a run).
     Functions: :meth:`init`, :meth:`step`, :meth:`run`, :meth:`run_steps`, :meth:`contacts`,
-    :meth:`energies`, :meth:`reallocate`, :meth:`adopt`.
+    :meth:`energies`, :meth:`reallocate`, :meth:`adopt`, :meth:`position_resolution`.
 
     ``step_fn(state) -> (state, contacts)`` and ``run_steps_fn(state, n_steps) -> state`` are
     the same functions un-jitted, for composing them into a larger program (``vmap`` over an
@@ -292,6 +293,19 @@ class DEM:
     step_fn: Optional[Callable] = None
     run_steps_fn: Optional[Callable] = None
     conduction: Optional[PairConduction] = None
+
+    def position_resolution(self) -> PositionResolution:
+        """What the mechanics' float type resolves in this DEM's domain: the position spacing
+        at its largest coordinate against the overlap under a particle's own weight
+        (:func:`drumheat.mechanics.precision.position_resolution`)."""
+        radius = np.asarray(self.particles.radius)
+        # the escape box is the walls' box (or the given bounds; [0, L) along a periodic axis)
+        # widened by the largest radius; the centres stay the smallest radius inside the walls
+        inset = float(np.max(radius)) + np.full(self.dim, float(np.min(radius)))
+        if self.neighbor.periodic_length is not None:
+            inset[-1] = float(np.max(radius))
+        return position_resolution(self.dtype, self.domain_lo + inset, self.domain_hi - inset,
+                                   self.dt, self.m_min, self.k_max, self.gravity)
 
     # -- construction of states --------------------------------------------------------------
 
@@ -712,6 +726,24 @@ def _checked_time_step(mass, params, dt, safety_factor, rotation):
     return dt, t_crit, m_min, k_max
 
 
+def _warn_coarse_positions(res: PositionResolution) -> None:
+    """Warn (:class:`DEMAccuracyWarning`) where the mechanics' float type cannot resolve the
+    overlap under a particle's own weight in the domain (:mod:`drumheat.mechanics.precision`)."""
+    ratio = res.spacing_over_weight_overlap
+    if ratio is None or ratio < 1.0:
+        return
+    axis = int(np.argmax(res.spacing))
+    warnings.warn(
+        f"{res.dtype} mechanics resolve positions in this domain only to "
+        f"{res.spacing[axis]:.2g} m (the spacing of {res.dtype} at the domain's largest "
+        f"coordinate, along {'xyz'[axis]}), {ratio:.2g} times the overlap under a particle's own "
+        f"weight, m g / k_n = {res.weight_overlap:.2g} m: resting contacts cannot represent "
+        "the force that carries one particle, and a particle slower than "
+        f"{res.slowest_speed[axis]:.2g} m/s along that axis does not move along it in a step "
+        "(drumheat.mechanics.precision; docs/performance.md, precision). Run the mechanics in "
+        "float64 ([dem] precision = \"float64\").", DEMAccuracyWarning, stacklevel=3)
+
+
 def _neighbour_domain(walls, dim, radius, skin, gap_cut, bounds, periodic_length,
                       capacity_multiplier, builder="jax", pair_order="index"):
     """``(neighbour setup, cell-capacity floor, escape box lo, hi)`` of a DEM domain.
@@ -793,7 +825,10 @@ def make_dem(
         kept in [0, L).
       bounds: ``(lo, hi)`` of the domain (m); default from the walls (e.g. the drum shell).
       skin: neighbour-list skin (m); default 0.5 x the largest radius (cutoff 2 r_max + skin).
-      dtype: float dtype of the mechanics (float32 or float64); time stays float64.
+      dtype: float dtype of the mechanics (float32 or float64); time stays float64. The
+        positions are kept in it too: where its spacing at the domain's largest coordinate
+        reaches the overlap under a particle's own weight (float32 in a long periodic slice),
+        a :class:`DEMAccuracyWarning` says so (:mod:`drumheat.mechanics.precision`).
       always_rebuild: rebuild the neighbour list every step (for testing the history remap).
       max_overlap: overlap / smaller radius that stops a run (default 0.5, PFC's stated
         assumption, Weigler digest sec. 4 [2.4]).
@@ -897,7 +932,7 @@ def make_dem(
         always_rebuild=always_rebuild, batch_axis=batch_axis, external_force=external_force,
         conduction=conduction, extra_update=extra_update, boundary_update=boundary_update)
     diag = jax.jit(partial(_chunk_diagnostics, lo=dom_lo, hi=dom_hi, periodic_axis=periodic_axis))
-    return DEM(
+    dem = DEM(
         dt=dt, t_crit=t_crit, m_min=m_min, k_max=k_max, dim=dim, walls=walls,
         particles=particles, params=params, neighbor=neighbor, dtype=dtype, gravity=gravity,
         max_overlap=float(max_overlap), domain_lo=dom_lo, domain_hi=dom_hi,
@@ -906,3 +941,5 @@ def make_dem(
         default_chunk=int(chunk), conduction=conduction,
         cell_capacity=cell_cap, _external=external_force, step_fn=step, run_steps_fn=run_steps,
     )
+    _warn_coarse_positions(dem.position_resolution())
+    return dem

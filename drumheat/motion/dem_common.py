@@ -60,7 +60,8 @@ class DEMMotion(AbstractMotion):
         return self._backend
 
     def backend_info(self) -> dict:
-        """What summary.json says about the contact kernel and the time step of the run."""
+        """What summary.json says about the contact kernel, the time step and what the mechanics'
+        float type resolves (:func:`drumheat.mechanics.precision.position_resolution`)."""
         choice = self.contact_backend()
         info = {"contact_backend": choice.backend}
         if choice.reason is not None:
@@ -69,6 +70,7 @@ class DEMMotion(AbstractMotion):
         info["time_step"] = {"dt_s": self.dt, "t_crit_s": self.t_crit,
                              "dt_over_t_crit": self.dt / self.t_crit,
                              "set_by": self.setup.dt_origin}
+        info["precision"] = self.dem.position_resolution().summary()
         return info
 
     # -- per-particle mechanics in the outputs ----------------------------------------------------

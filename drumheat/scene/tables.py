@@ -597,8 +597,12 @@ class DEMConfig(Table):
             "falls back to JAX with one warning line; summary.json says which ran "
             "(contact_backend).")
     precision: str = spec("float64", choices=("float32", "float64"),
-                          doc="Floating-point type of the mechanics; temperatures are always "
-                              "float64.")
+                          doc="Floating-point type of the mechanics, positions included; "
+                              "temperatures are always float64. float32 is quicker but "
+                              "resolves a position only to about 1e-7 of the coordinate: a "
+                              "warning says where that reaches the overlap under a particle's "
+                              "own weight (long periodic slices); summary.json gives the "
+                              "figures (precision).")
     thermal_substeps: int = spec(1, ge=1,
                                  doc="Mechanical steps per thermal step; each contact's "
                                      "conductance is weighted by the time it existed within "

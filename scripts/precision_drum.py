@@ -1,0 +1,155 @@
+"""What float32 mechanics (``[dem] precision = "float32"``) does to the built-in 3D drum.
+
+Usage: python scripts/precision_drum.py [--n 10000 50000] [--warm-seconds 1.0]
+       [--seconds 0.5] [--samples 3] [--offset 50] [--probe 20] [--packings DIR]
+
+The mechanics store positions in the chosen float type, so float32 resolves a coordinate x
+only to its spacing ulp(x) (2^-23 |x| and less): the coordinates of glass-drum-3d reach
+0.125 m across the drum and the slice's depth (N x 2.6e-5 m) along the periodic axis. Two
+things follow from the set-up alone, printed first for each N and axis:
+
+* a drift dt v smaller than half the spacing leaves the coordinate unchanged, so a particle
+  slower than ulp / (2 dt) along that axis does not move along it at all in a step;
+* a contact's overlap, and with it the normal force k_n delta, is resolved only to about the
+  spacing: k_n ulp against a particle's weight m g is the force quantum per contact, and the
+  spacing against the median overlap of the touching pairs (measured in the float64 bed) its
+  relative size.
+
+Then measured, for each N: the scene from its poured bed (``--packings``, as the benchmarks) is
+run ``--warm-seconds`` in float64 (the start-up of the turning bed); from there ``--samples``
+starts, each ``--offset`` float64 steps after the previous one and its positions moved by random
+1e-13 m (far below anything physical: the flow, which is chaotic, turns it into independent
+samples of the same flow; without the move float64 would retrace the first start's trajectory,
+and float32's rounding erases the move, so its starts differ by the offset), and from each start
+two runs of ``--seconds``: float64 and float32 (the float64 state rounded).
+For each run: the bed's mean temperature rise (the product's answer), the axial mean squared
+displacement (the periodic axis, where float32's spacing is the coarsest), the share of
+particles whose axial coordinate did not change in one step (over ``--probe`` steps at the
+end), and the mean kinetic energy per particle; then the mean and the spread (max - min) of
+each precision. float32 is as good as float64 for a quantity where its mean lies within the
+float64 samples' scatter.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import drumheat  # noqa: F401  (x64 for the temperatures)
+from bench_vs_liggghts import scene_for, scene_packing  # noqa: E402  (scripts/)
+from drumheat.motion import make_motion
+
+G = 9.81
+
+
+def motion_for(n, precision, packings):
+    return make_motion(scene_for(n, "cpu", scene_packing(n, packings), precision))
+
+
+def as_template(template, state):
+    """``state``'s values in the dtypes of ``template`` (a state of the other precision)."""
+    return jax.tree_util.tree_map(lambda t, v: jnp.asarray(v, t.dtype), template, state)
+
+
+def resolution(motion, state):
+    """Rows (axis, extent, ulp, slowest moving speed, k_n ulp / m g, ulp / median overlap)."""
+    x = np.abs(np.asarray(state.position, np.float64)).max(axis=0)
+    c = motion.dem.contacts(state)
+    ov = np.asarray(c.pair_overlap)[np.asarray(c.pair_mask)]
+    m = float(np.asarray(motion.dem.particles.mass).mean())
+    rows = []
+    for axis, ext in zip("xyz", x):
+        u = float(np.spacing(np.float32(ext)))
+        rows.append((axis, ext, u, u / (2 * motion.dem.dt), motion.k_n * u / (m * G),
+                     u / float(np.median(ov))))
+    return rows, float(np.median(ov))
+
+
+def sample(motion, state, seconds, probe, chunk=2000):
+    """Run ``seconds`` from ``state``: (mean temperature rise K, axial MSD m^2, share of
+    particles with an unchanged axial coordinate per step, mean kinetic energy J, wall s)."""
+    dem = motion.dem
+    steps = int(round(seconds / dem.dt))
+    length = float(motion.periodic)
+    z0 = np.asarray(state.position[:, 2], np.float64)
+    dz = np.zeros_like(z0)
+    t0_mean = float(jnp.mean(state.extra.T))
+    ke, done, t0 = [], 0, time.perf_counter()
+    while done < steps:
+        k = min(chunk, steps - done)
+        state = dem.run(state, k, chunk=k)
+        z1 = np.asarray(state.position[:, 2], np.float64)
+        d = z1 - z0
+        dz += d - length * np.round(d / length)  # the periodic image: |d| << L per chunk
+        z0 = z1
+        v = np.asarray(state.velocity, np.float64)
+        ke.append(0.5 * float(np.mean(np.asarray(dem.particles.mass) * np.sum(v * v, axis=1))))
+        done += k
+    wall = time.perf_counter() - t0
+    frozen = []
+    for _ in range(probe):
+        z1 = np.asarray(state.position[:, 2])
+        state = dem.run(state, 1, chunk=1)
+        frozen.append(float(np.mean(np.asarray(state.position[:, 2]) == z1)))
+    rise = float(jnp.mean(state.extra.T)) - t0_mean
+    return rise, float(np.mean(dz**2)), float(np.mean(frozen)), float(np.mean(ke)), wall
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[10000, 50000])
+    ap.add_argument("--warm-seconds", type=float, default=1.0)
+    ap.add_argument("--seconds", type=float, default=0.5)
+    ap.add_argument("--samples", type=int, default=3, help="starts (each run in both precisions)")
+    ap.add_argument("--offset", type=int, default=50, help="float64 steps between the starts")
+    ap.add_argument("--probe", type=int, default=20, help="single steps probed at the end")
+    ap.add_argument("--packings", default="/tmp/drumheat_packings")
+    args = ap.parse_args()
+    for n in args.n:
+        m64, m32 = motion_for(n, "float64", args.packings), motion_for(n, "float32", args.packings)
+        s = m64.initial_state()
+        t0 = time.perf_counter()
+        s = m64.dem.run(s, int(round(args.warm_seconds / m64.dem.dt)), chunk=5000)
+        jax.block_until_ready(s.position)
+        print(f"N = {n}: dt = {m64.dem.dt:.3g} s, k_n = {m64.k_n:.3g} N/m, periodic length "
+              f"{float(m64.periodic):.3f} m; warm-up {args.warm_seconds} s in float64 "
+              f"({time.perf_counter() - t0:.0f} s wall)", flush=True)
+        rows, med = resolution(m64, s)
+        print(f"  float32 resolution at the bed's largest coordinates (median overlap of the "
+              f"touching pairs {med:.3g} m):")
+        print("  | axis | largest abs coordinate (m) | float32 spacing (m) | slowest speed that "
+              "moves in a step (m/s) | k_n spacing / m g | spacing / median overlap |")
+        print("  |---|---|---|---|---|---|")
+        for axis, ext, u, vmin, fq, rel in rows:
+            print(f"  | {axis} | {ext:.3f} | {u:.3g} | {vmin:.3g} | {fq:.2f} | {rel:.2f} |")
+        print(f"  over {args.seconds} s from each of {args.samples} starts {args.offset} steps "
+              "apart:")
+        print("  | run | mean temperature rise (K) | axial MSD (mm^2) | axial coordinate "
+              "unchanged in a step | mean kinetic energy (uJ) | wall (s) |")
+        print("  |---|---|---|---|---|---|")
+        template32, got, start = m32.initial_state(), {"float64": [], "float32": []}, s
+        for k in range(args.samples):
+            if k:
+                start = m64.dem.run(start, args.offset, chunk=args.offset)
+                start = start._replace(position=start.position + 1e-13 * jax.random.normal(
+                    jax.random.PRNGKey(k), start.position.shape, start.position.dtype))
+            for name, mo, st in (("float64", m64, start),
+                                 ("float32", m32, as_template(template32, start))):
+                r = sample(mo, st, args.seconds, args.probe)
+                got[name].append(r)
+                print(f"  | {name}, start {k} | {r[0]:.5f} | {1e6 * r[1]:.3f} | "
+                      f"{100 * r[2]:.1f} % | {1e6 * r[3]:.3f} | {r[4]:.0f} |", flush=True)
+        for name, rs in got.items():
+            a = np.array(rs)
+            mean, spread = a.mean(axis=0), a.max(axis=0) - a.min(axis=0)
+            print(f"  | {name}, mean (spread) | {mean[0]:.5f} ({spread[0]:.5f}) | "
+                  f"{1e6 * mean[1]:.3f} ({1e6 * spread[1]:.3f}) | {100 * mean[2]:.1f} % | "
+                  f"{1e6 * mean[3]:.3f} ({1e6 * spread[3]:.3f}) | |")
+
+
+if __name__ == "__main__":
+    main()
