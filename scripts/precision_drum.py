@@ -41,12 +41,12 @@ import numpy as np
 
 import drumheat  # noqa: F401  (x64 for the temperatures)
 from bench_vs_liggghts import scene_for, scene_packing  # noqa: E402  (scripts/)
+from drumheat.mechanics.precision import position_resolution
 from drumheat.motion import make_motion
-
-G = 9.81
 
 
 def motion_for(n, precision, packings):
+    """glass-drum-3d at N on the C++ loop, the mechanics in ``precision``, from the poured bed."""
     return make_motion(scene_for(n, "cpu", scene_packing(n, packings), precision))
 
 
@@ -56,17 +56,16 @@ def as_template(template, state):
 
 
 def resolution(motion, state):
-    """Rows (axis, extent, ulp, slowest moving speed, k_n ulp / m g, ulp / median overlap)."""
+    """Rows (axis, largest coordinate, float32 spacing, slowest moving speed, spacing / (m g /
+    k_n), spacing / median overlap) at the bed's own largest coordinates
+    (:func:`drumheat.mechanics.precision.position_resolution`), and the median overlap."""
+    dem = motion.dem
     x = np.abs(np.asarray(state.position, np.float64)).max(axis=0)
-    c = motion.dem.contacts(state)
-    ov = np.asarray(c.pair_overlap)[np.asarray(c.pair_mask)]
-    m = float(np.asarray(motion.dem.particles.mass).mean())
-    rows = []
-    for axis, ext in zip("xyz", x):
-        u = float(np.spacing(np.float32(ext)))
-        rows.append((axis, ext, u, u / (2 * motion.dem.dt), motion.k_n * u / (m * G),
-                     u / float(np.median(ov))))
-    return rows, float(np.median(ov))
+    res = position_resolution(np.float32, -x, x, dem.dt, dem.m_min, dem.k_max, dem.gravity)
+    c = dem.contacts(state)
+    med = float(np.median(np.asarray(c.pair_overlap)[np.asarray(c.pair_mask)]))
+    return [(axis, ext, u, v, u / res.weight_overlap, u / med)
+            for axis, ext, u, v in zip("xyz", x, res.spacing, res.slowest_speed)], med
 
 
 def sample(motion, state, seconds, probe, chunk=2000):
