@@ -22,8 +22,8 @@ steps, the device's peak memory (``memory_stats()['peak_bytes_in_use']``, GPU) o
 peak resident memory (CPU), both per particle, the mean temperature change as a sanity
 check that heat moved, and what the precision resolves (``spacing/dg``: the position spacing at
 the slice's largest coordinate over the overlap under a bead's own weight,
-:mod:`drumheat.mechanics.precision`; float32 reaches 1 from N = 4e4 on, so its rows at 1e5 and
-1e6 time the card, not results to use).
+:mod:`drumheat.mechanics.precision`; float32 reaches 1 from N = 4e4 on: its rows at 1e5 and
+1e6 time the card, and what float32 does to the bed there was not checked against float64).
 
 With ``--trace STEPS``, each case then runs ``dem.run_steps`` over STEPS steps under the JAX
 profiler and prints the device's kernels and the host's work summed per step
@@ -237,8 +237,8 @@ def main():
               f"{r.get('spacing_over_weight_overlap') or float('nan'):>10.3g}")
     print("spacing/dg: the mechanics' position spacing at the slice's largest coordinate over the "
           "overlap under a bead's own weight (drumheat.mechanics.precision); from 1 on the "
-          "float type cannot resolve a resting contact, and the row times the card, not a "
-          "result to use")
+          "float type cannot resolve a resting contact: compare such a row's results with "
+          "float64 before using them (docs/performance.md, precision)")
 
 
 if __name__ == "__main__":
