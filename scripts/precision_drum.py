@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -43,6 +44,7 @@ import drumheat  # noqa: F401  (x64 for the temperatures)
 from bench_vs_liggghts import scene_for, scene_packing  # noqa: E402  (scripts/)
 from drumheat.mechanics.precision import position_resolution
 from drumheat.motion import make_motion
+from drumheat.runner.checkpoint import state_structure
 
 
 def motion_for(n, precision, packings):
@@ -50,9 +52,11 @@ def motion_for(n, precision, packings):
     return make_motion(scene_for(n, "cpu", scene_packing(n, packings), precision))
 
 
-def as_template(template, state):
-    """``state``'s values in the dtypes of ``template`` (a state of the other precision)."""
-    return jax.tree_util.tree_map(lambda t, v: jnp.asarray(v, t.dtype), template, state)
+def as_template(motion, template, state):
+    """``state``'s arrays put onto ``template`` (a fresh state of ``motion``, here the other
+    precision) as a checkpoint is restored, in the template's dtypes."""
+    leaves = jax.tree_util.tree_leaves(eqx.partition(state, eqx.is_array)[0])
+    return motion.restore_state(template, leaves, {"structure": state_structure(state)}, None)[0]
 
 
 def resolution(motion, state):
@@ -137,7 +141,7 @@ def main():
                 start = start._replace(position=start.position + 1e-13 * jax.random.normal(
                     jax.random.PRNGKey(k), start.position.shape, start.position.dtype))
             for name, mo, st in (("float64", m64, start),
-                                 ("float32", m32, as_template(template32, start))):
+                                 ("float32", m32, as_template(m32, template32, start))):
                 r = sample(mo, st, args.seconds, args.probe)
                 got[name].append(r)
                 print(f"  | {name}, start {k} | {r[0]:.5f} | {1e6 * r[1]:.3f} | "

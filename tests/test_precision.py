@@ -91,3 +91,17 @@ def test_summary_says_what_the_mechanics_resolve():
     assert info["position_spacing_m"][2] == 2.0**-23
     info = make_motion(load_scene("glass-drum-3d")).backend_info()["precision"]
     assert info["mechanics"] == "float64" and info["spacing_over_weight_overlap"] < 1e-8
+
+
+
+def test_several_dems_say_it_once():
+    """A scene builds several DEMs in the same slice (the pour's, the run's), from different
+    places: Python's default filter shows the one message once (it is raised at make_dem's own
+    line)."""
+    part = make_particles(np.full(2, RP), RHO)
+    params = contact_params(K, restitution=0.5, friction=0.5)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")
+        make_dem(part, [DrumShell(R)], params, dim=3, periodic_length=1.3, dtype=jnp.float32)
+        make_dem(part, [DrumShell(R)], params, dim=3, periodic_length=1.3, dtype=jnp.float32)
+    assert len([w for w in caught if issubclass(w.category, DEMAccuracyWarning)]) == 1

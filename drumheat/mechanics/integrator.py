@@ -742,7 +742,8 @@ def _warn_coarse_positions(res: PositionResolution) -> None:
         f"{res.slowest_speed[axis]:.2g} m/s along that axis does not move along it in a step "
         "(drumheat.mechanics.precision; docs/performance.md, precision). Run the mechanics in "
         "float64 ([dem] precision = \"float64\"), or compare with a float64 run before using "
-        "the results.", DEMAccuracyWarning, stacklevel=3)
+        "the results.", DEMAccuracyWarning,
+        stacklevel=2)  # make_dem's line: a scene builds several DEMs (pour, run), one line shows
 
 
 def _neighbour_domain(walls, dim, radius, skin, gap_cut, bounds, periodic_length,
