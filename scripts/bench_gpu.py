@@ -74,17 +74,18 @@ def make_base(path: Path) -> None:
 
 
 def tiled(base: Path, n: int, out: Path) -> Path:
-    """The base slice repeated n / 2000 times along the periodic axis (seamless: the slice is
-    periodic with its depth)."""
+    """The poured slice in ``base`` (any N0, depth N0 x 2.6e-5 m, the scene's knob) repeated
+    n / N0 times along the periodic axis (seamless: the slice is periodic with its depth)."""
     import numpy as np
 
-    if n % BASE_N:
-        raise SystemExit(f"N must be a multiple of {BASE_N} (the poured slice is tiled)")
     with np.load(base) as f:
         pos = f["position"]
-    k = n // BASE_N
+    n0 = len(pos)
+    if n % n0:
+        raise SystemExit(f"N must be a multiple of {n0} (the poured slice {base} is tiled)")
+    k = n // n0
     shift = np.zeros((k, 1, 3))
-    shift[:, 0, 2] = BASE_DEPTH * np.arange(k)
+    shift[:, 0, 2] = n0 * BASE_DEPTH / BASE_N * np.arange(k)
     np.savez(out, position=(pos[None] + shift).reshape(n, 3), diameter=np.full(n, 0.008),
              group=np.zeros(n, int))
     return out

@@ -2,6 +2,7 @@
 
 Usage: python scripts/precision_drum.py [--n 10000 50000] [--warm-seconds 1.0]
        [--seconds 0.5] [--samples 3] [--offset 50] [--probe 20] [--packings DIR]
+       [--tile FILE] [--backend auto|cpu|jax]
 
 The mechanics store positions in the chosen float type, so float32 resolves a coordinate x
 only to its spacing ulp(x) (2^-23 |x| and less): the coordinates of glass-drum-3d reach
@@ -15,9 +16,10 @@ things follow from the set-up alone, printed first for each N and axis:
   spacing against the median overlap of the touching pairs (measured in the float64 bed) its
   relative size.
 
-Then measured, for each N: the scene from its poured bed (``--packings``, as the benchmarks) is
-run ``--warm-seconds`` in float64 (the start-up of the turning bed); from there ``--samples``
-starts, each ``--offset`` float64 steps after the previous one and its positions moved by random
+Then measured, for each N: the scene from its poured bed (``--packings``, as the benchmarks; or,
+with ``--tile FILE``, a poured slice of N0 particles repeated N / N0 times along the periodic
+axis, as ``bench_gpu.py`` does for the GPU sizes) is run ``--warm-seconds`` in float64 (the
+start-up of the turning bed); from there ``--samples`` starts, each ``--offset`` float64 steps after the previous one and its positions moved by random
 1e-13 m (far below anything physical: the flow, which is chaotic, turns it into independent
 samples of the same flow; without the move float64 would retrace the first start's trajectory,
 and float32's rounding erases the move, so its starts differ by the offset), and from each start
@@ -33,7 +35,9 @@ float64 samples' scatter.
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
+from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -41,15 +45,17 @@ import jax.numpy as jnp
 import numpy as np
 
 import drumheat  # noqa: F401  (x64 for the temperatures)
+from bench_gpu import tiled  # noqa: E402  (scripts/)
 from bench_vs_liggghts import scene_for, scene_packing  # noqa: E402  (scripts/)
 from drumheat.mechanics.precision import position_resolution
 from drumheat.motion import make_motion
 from drumheat.runner.checkpoint import state_structure
 
 
-def motion_for(n, precision, packings):
-    """glass-drum-3d at N on the C++ loop, the mechanics in ``precision``, from the poured bed."""
-    return make_motion(scene_for(n, "cpu", scene_packing(n, packings), precision))
+def motion_for(n, precision, packing, backend):
+    """glass-drum-3d at N on the contact ``backend`` ("auto": the C++ loop on a CPU, the JAX
+    kernel on a GPU), the mechanics in ``precision``, from the ``packing`` file."""
+    return make_motion(scene_for(n, backend, packing, precision))
 
 
 def as_template(motion, template, state):
@@ -111,16 +117,23 @@ def main():
     ap.add_argument("--offset", type=int, default=50, help="float64 steps between the starts")
     ap.add_argument("--probe", type=int, default=20, help="single steps probed at the end")
     ap.add_argument("--packings", default="/tmp/drumheat_packings")
+    ap.add_argument("--tile", type=Path, help="poured slice to repeat along the axis to N "
+                    "(instead of --packings)")
+    ap.add_argument("--backend", default="auto", choices=["auto", "cpu", "jax"])
     args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp())
     for n in args.n:
-        m64, m32 = motion_for(n, "float64", args.packings), motion_for(n, "float32", args.packings)
+        packing = (tiled(args.tile, n, tmp / f"tiled_{n}.npz") if args.tile
+                   else scene_packing(n, args.packings))
+        m64, m32 = (motion_for(n, p, packing, args.backend) for p in ("float64", "float32"))
         s = m64.initial_state()
         t0 = time.perf_counter()
         s = m64.dem.run(s, int(round(args.warm_seconds / m64.dem.dt)), chunk=5000)
         jax.block_until_ready(s.position)
-        print(f"N = {n}: dt = {m64.dem.dt:.3g} s, k_n = {m64.k_n:.3g} N/m, periodic length "
-              f"{float(m64.periodic):.3f} m; warm-up {args.warm_seconds} s in float64 "
-              f"({time.perf_counter() - t0:.0f} s wall)", flush=True)
+        print(f"N = {n} on {jax.devices()[0].device_kind}, contact backend "
+              f"{m64.contact_backend().backend}: dt = {m64.dem.dt:.3g} s, k_n = {m64.k_n:.3g} "
+              f"N/m, periodic length {float(m64.periodic):.3f} m; warm-up {args.warm_seconds} s "
+              f"in float64 ({time.perf_counter() - t0:.0f} s wall)", flush=True)
         rows, med = resolution(m64, s)
         print(f"  float32 resolution at the bed's largest coordinates (median overlap of the "
               f"touching pairs {med:.3g} m):")

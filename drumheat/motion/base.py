@@ -209,10 +209,11 @@ class AbstractMotion(abc.ABC):
 def _like(template, values):
     """``values`` as a device array of the template's dtype and weak type (so that a restored
     state promotes in arithmetic exactly like the original)."""
-    values = np.asarray(values)
-    if np.shape(template) == values.shape:
-        return jax.numpy.asarray(template).at[...].set(values)
-    return jax.numpy.asarray(values, dtype=jax.numpy.asarray(template).dtype)
+    template = jax.numpy.asarray(template)
+    values = np.asarray(values).astype(template.dtype, copy=False)  # e.g. float64 -> float32
+    if template.shape == values.shape:
+        return template.at[...].set(values)
+    return jax.numpy.asarray(values)
 
 
 #: ``[motion] model`` -> motion class (filled by :func:`register`)
