@@ -342,7 +342,8 @@ class DEMSetup(NamedTuple):
     else the smaller of ``safety_factor x t_crit`` and the explicit limit of the tangential
     dashpots, :meth:`ContactParams.dashpot_time_step`), s, before a motion model fits it to
     its intervals (:func:`fit_time_step`); dt_origin: which of these set it; dtype of the
-    mechanics; gravity vector, m/s2; density (N,), kg/m3.
+    mechanics and position_dtype of the stored positions (``dem.precision``: float64 both,
+    float32 both, or mixed: float32 and float64); gravity vector, m/s2; density (N,), kg/m3.
     """
 
     particles: Particles
@@ -355,6 +356,7 @@ class DEMSetup(NamedTuple):
     gravity: np.ndarray
     density: np.ndarray
     conduction_gap: tuple[float, float]
+    position_dtype: Any = jnp.float64
 
 
 def dem_setup(scene: Scene) -> DEMSetup:
@@ -379,8 +381,9 @@ def dem_setup(scene: Scene) -> DEMSetup:
                      else "dem.safety_factor x t_crit")
     return DEMSetup(
         particles=particles, params=params, k_n=k_n, t_crit=t_crit, dt=dt, dt_origin=dt_origin,
-        dtype=jnp.float32 if cfg.precision == "float32" else jnp.float64, gravity=gravity,
-        density=density, conduction_gap=conduction_gaps(scene))
+        dtype=jnp.float64 if cfg.precision == "float64" else jnp.float32, gravity=gravity,
+        density=density, conduction_gap=conduction_gaps(scene),
+        position_dtype=jnp.float32 if cfg.precision == "float32" else jnp.float64)
 
 
 def friction_heat(scene: Scene) -> FrictionHeat | None:
@@ -474,7 +477,7 @@ def drum_packing(scene: Scene, setup: DEMSetup, walls, periodic_length=None) -> 
     common = dict(dim=scene.dim, group=group_index(scene),
                   layered=scene.packing.arrangement == "layers",
                   periodic_length=periodic_length, gravity=setup.gravity, seed=scene.run.seed,
-                  dtype=setup.dtype)
+                  dtype=setup.position_dtype)  # mixed pours in float64: a pour is no run
     d = scene.drum
     if d.sections:
         pk = pour_sections(radius, density, walls, setup.params, n_sections=d.sections,

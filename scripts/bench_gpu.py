@@ -20,16 +20,18 @@ For each (N, precision) a fresh process builds the motion model (``make_motion``
 ``--seconds`` of wall time. Reported: particle-steps/s, neighbour-list rebuilds in the timed
 steps, the device's peak memory (``memory_stats()['peak_bytes_in_use']``, GPU) or the process's
 peak resident memory (CPU), both per particle, the mean temperature change as a sanity
-check that heat moved, and what the precision resolves (``spacing/dg``: the position spacing at
-the slice's largest coordinate over the overlap under a bead's own weight,
-:mod:`drumheat.mechanics.precision`; float32 reaches 1 from N = 4e4 on: its rows at 1e5 and
-1e6 time the card, and what float32 does to the bed there was not checked against float64).
+check that heat moved, and what the precision resolves (``spacing/dg``: the spacing of the
+coordinates the contact law reads, at their largest value, over the overlap under a bead's own
+weight, :mod:`drumheat.mechanics.precision`). float32 reaches 1 from N = 4e4 on: its rows at
+1e5 and 1e6 time the card on a bed float32 gets wrong (at 1e6 the kinetic energy 15-18 % off
+float64's, docs/performance.md, precision); ``mixed`` (float64 positions, the contact law
+reading them folded along the axis) stays below 0.5 at every N.
 
 With ``--trace STEPS``, each case then runs ``dem.run_steps`` over STEPS steps under the JAX
 profiler and prints the device's kernels and the host's work summed per step
 (``scripts/trace_summary.py``); ``--trace-dir`` keeps the trace files.
 
-Usage: python scripts/bench_gpu.py [--n 100000 1000000] [--precision float32 float64]
+Usage: python scripts/bench_gpu.py [--n 100000 1000000] [--precision float32 float64 mixed]
        [--seconds 15] [--warm 300] [--base FILE] [--json FILE] [--trace STEPS --trace-dir DIR]
        python scripts/bench_gpu.py --make-base FILE     (pour the N = 2000 slice, save it)
 """
@@ -167,7 +169,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[100000, 1000000])
     ap.add_argument("--precision", nargs="+", default=["float32", "float64"],
-                    choices=["float32", "float64"])
+                    choices=["float32", "float64", "mixed"])
     ap.add_argument("--seconds", type=float, default=15.0, help="wall time of each timing")
     ap.add_argument("--warm", type=int, default=300, help="steps before the timing")
     ap.add_argument("--base", type=Path, default=DEFAULT_BASE, help="the poured N=2000 slice")
@@ -236,10 +238,10 @@ def main():
               f"{r['wall_s']:>7.1f} {r['rebuilds']:>8} {r['bytes_per_particle'] / 1e3:>8.2f} "
               f"{r['setup_s']:>8.0f} {r['warm_s']:>7.0f} {r['dT_mean']:>10.3g} "
               f"{r.get('spacing_over_weight_overlap') or float('nan'):>10.3g}")
-    print("spacing/dg: the mechanics' position spacing at the slice's largest coordinate over the "
-          "overlap under a bead's own weight (drumheat.mechanics.precision); from 1 on the "
-          "float type cannot resolve a resting contact: compare such a row's results with "
-          "float64 before using them (docs/performance.md, precision)")
+    print("spacing/dg: the spacing of the coordinates the contact law reads, at their largest, "
+          "over the overlap under a bead's own weight (drumheat.mechanics.precision); from 1 on "
+          "the float type cannot resolve a resting contact: such a row times a wrong bed "
+          "(docs/performance.md, precision; use mixed)")
 
 
 if __name__ == "__main__":

@@ -288,11 +288,12 @@ def main():
                     help="drumheat pair kernels to time: the JAX kernel and/or the C++ loop "
                          "(make_dem(pair_kernel='cpu'), where it is available)")
     ap.add_argument("--precision", nargs="+", default=["float64"],
-                    choices=["float64", "float32"],
+                    choices=["float64", "float32", "mixed"],
                     help="the scene's mechanics (dem.precision; temperatures stay float64): "
                          "float32 resolves positions only coarsely (scripts/precision_drum.py, "
                          "docs/performance.md), so its rows are speed, not a like-for-like "
-                         "comparison with LIGGGHTS' double precision")
+                         "comparison with LIGGGHTS' double precision; mixed keeps the "
+                         "positions in float64, the rest in float32")
     ap.add_argument("--bespoke", action="store_true",
                     help="time drumheat's DEM built here from the LIGGGHTS packing (the "
                          "earlier path) instead of the built-in scene glass-drum-3d")

@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # The GPU checks of one borrowed-GPU session, as one command (docs/performance.md, GPU):
 #   1. the card and JAX's view of it;
-#   2. scripts/bench_gpu.py: glass-drum-3d through the product path at N = 1e5 and 1e6, float32
-#      and float64 mechanics: particle-steps/s and peak device memory per particle;
+#   2. scripts/bench_gpu.py: glass-drum-3d through the product path at N = 1e5 and 1e6, float64,
+#      mixed and float32 mechanics: particle-steps/s and peak device memory per particle;
 #   3. the tests of the newer heat features (coupled contact times, friction heat, drum wall,
 #      coarse-graining) on the GPU: the same code must give the same physics there (the suite
 #      itself never needs one).
-# Environment knobs: PRECISIONS (default "float32 float64"), NS ("100000 1000000"), TRACE
+# Environment knobs: PRECISIONS (default "float64 mixed float32"), NS ("100000 1000000"), TRACE
 # (steps of a profiler trace after each timing, 0 = none; the trace files go to $OUT, the
 # per-kernel lines to bench_gpu.log only), TESTS (the test files), TEST_SECONDS (their limit).
 # Wheels a GPU machine without network lacks (tomli_w; jax-md and its needs for the tests) may
@@ -31,7 +31,7 @@ python3 -c "import jax; print('jax', jax.__version__, jax.devices())"
 TESTS=${TESTS:-tests/test_coupled.py tests/test_friction_heat.py tests/test_drum_wall.py tests/test_coarse_grain.py}
 # shellcheck disable=SC2086  # word splitting of the lists is meant
 timeout 330 python3 scripts/bench_gpu.py --n ${NS:-100000 1000000} \
-  --precision ${PRECISIONS:-float32 float64} --seconds "$SECONDS_PER_CASE" --warm 200 \
+  --precision ${PRECISIONS:-float64 mixed float32} --seconds "$SECONDS_PER_CASE" --warm 200 \
   --timeout 150 --json "$OUT/bench_gpu.jsonl" --trace "${TRACE:-0}" --trace-dir "$OUT" \
   2>&1 | tee "$OUT/bench_gpu.log" | grep -v '^  '
 # shellcheck disable=SC2086

@@ -1,8 +1,9 @@
-"""What float32 mechanics (``[dem] precision = "float32"``) does to the built-in 3D drum.
+"""What float32 mechanics (``[dem] precision = "float32"``, or ``"mixed"``: float64 positions,
+the rest float32) does to the built-in 3D drum.
 
 Usage: python scripts/precision_drum.py [--n 10000 50000] [--warm-seconds 1.0]
        [--seconds 0.5] [--samples 3] [--offset 50] [--probe 20] [--packings DIR]
-       [--tile FILE] [--backend auto|cpu|jax]
+       [--tile FILE] [--backend auto|cpu|jax] [--compare float32 mixed]
 
 The mechanics store positions in the chosen float type, so float32 resolves a coordinate x
 only to its spacing ulp(x) (2^-23 |x| and less): the coordinates of glass-drum-3d reach
@@ -23,12 +24,14 @@ start-up of the turning bed); from there ``--samples`` starts, each ``--offset``
 1e-13 m (far below anything physical: the flow, which is chaotic, turns it into independent
 samples of the same flow; without the move float64 would retrace the first start's trajectory,
 and float32's rounding erases the move, so its starts differ by the offset), and from each start
-two runs of ``--seconds``: float64 and float32 (the float64 state rounded).
+runs of ``--seconds``: float64, and each precision of ``--compare`` (default float32; the
+float64 state put onto that precision's state as a checkpoint is restored: rounded, positions
+kept in float64 with mixed).
 For each run: the bed's mean temperature rise (the product's answer), the axial mean squared
 displacement (the periodic axis, where float32's spacing is the coarsest), the share of
 particles whose axial coordinate did not change in one step (over ``--probe`` steps at the
 end), and the mean kinetic energy per particle; then the mean and the spread (max - min) of
-each precision. float32 is as good as float64 for a quantity where its mean lies within the
+each precision. A precision is as good as float64 for a quantity where its mean lies within the
 float64 samples' scatter.
 """
 
@@ -120,12 +123,15 @@ def main():
     ap.add_argument("--tile", type=Path, help="poured slice to repeat along the axis to N "
                     "(instead of --packings)")
     ap.add_argument("--backend", default="auto", choices=["auto", "cpu", "jax"])
+    ap.add_argument("--compare", nargs="+", default=["float32"], choices=["float32", "mixed"],
+                    help="precisions run against float64 from each start")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     for n in args.n:
         packing = (tiled(args.tile, n, tmp / f"tiled_{n}.npz") if args.tile
                    else scene_packing(n, args.packings))
-        m64, m32 = (motion_for(n, p, packing, args.backend) for p in ("float64", "float32"))
+        m64 = motion_for(n, "float64", packing, args.backend)
+        others = {p: motion_for(n, p, packing, args.backend) for p in args.compare}
         s = m64.initial_state()
         t0 = time.perf_counter()
         s = m64.dem.run(s, int(round(args.warm_seconds / m64.dem.dt)), chunk=5000)
@@ -147,18 +153,20 @@ def main():
         print("  | run | mean temperature rise (K) | axial MSD (mm^2) | axial coordinate "
               "unchanged in a step | mean kinetic energy (uJ) | wall (s) |")
         print("  |---|---|---|---|---|---|")
-        template32, got, start = m32.initial_state(), {"float64": [], "float32": []}, s
+        templates = {p: mo.initial_state() for p, mo in others.items()}
+        got, start = {p: [] for p in ("float64", *others)}, s
         for k in range(args.samples):
             if k:
                 start = m64.dem.run(start, args.offset, chunk=args.offset)
                 start = start._replace(position=start.position + 1e-13 * jax.random.normal(
                     jax.random.PRNGKey(k), start.position.shape, start.position.dtype))
-            for name, mo, st in (("float64", m64, start),
-                                 ("float32", m32, as_template(m32, template32, start))):
+            runs = [("float64", m64, start)] + [
+                (p, mo, as_template(mo, templates[p], start)) for p, mo in others.items()]
+            for name, mo, st in runs:
                 r = sample(mo, st, args.seconds, args.probe)
                 got[name].append(r)
                 print(f"  | {name}, start {k} | {r[0]:.5f} | {1e6 * r[1]:.3f} | "
-                      f"{100 * r[2]:.1f} % | {1e6 * r[3]:.3f} | {r[4]:.0f} |", flush=True)
+                      f"{100 * r[2]:.1f} % | {1e6 * r[3]:.3f} | {r[4]:.1f} |", flush=True)
         for name, rs in got.items():
             a = np.array(rs)
             mean, spread = a.mean(axis=0), a.max(axis=0) - a.min(axis=0)

@@ -27,7 +27,8 @@ R_P = 0.002  # particle radius (m)
 
 
 def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling=True,
-         rotation=True, calm=False, friction_heat=None, shuffle=False):
+         rotation=True, calm=False, friction_heat=None, shuffle=False, layers=4,
+         position_dtype=None):
     """A small moving bed of two materials with rolling resistance in the lower half of an
     annulus between a rotating drum shell and a counter-rotating inner cylinder (2D, or a 3D
     slice with periodic z): spheres of 0.97-1 r on a 1.97 r lattice, jittered, so that many
@@ -38,12 +39,14 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     gravity (50 g) and the walls. Returns the DEM and a state (None for kernel "cpu": the
     state of the "jax" twin serves both). ``friction_heat``: make_dem's (a FrictionHeat, or a
     function of the particles that gives one). ``shuffle``: the particles numbered at random
-    (else along the lattice, so that neighbours lie near each other in the numbering)."""
+    (else along the lattice, so that neighbours lie near each other in the numbering).
+    ``layers``: lattice layers along the periodic z (3D); ``position_dtype``: make_dem's (the
+    state's positions in it)."""
     rng = np.random.default_rng(seed)
     R, r_in = 0.03, 0.008
     a = (2.0 if calm else 1.97) * R_P
     g = np.arange(-R, R, a) + 0.3 * a
-    zs = (np.arange(4) + 0.5) * a if dim == 3 else None
+    zs = (np.arange(layers) + 0.5) * a if dim == 3 else None
     grids = np.meshgrid(g, g, zs, indexing="ij") if dim == 3 else np.meshgrid(g, g, indexing="ij")
     pts = np.stack([x.ravel() for x in grids], 1)
     rho = np.hypot(pts[:, 0], pts[:, 1])
@@ -83,17 +86,18 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     # round-off over hundreds of steps (at 0.25 t_crit the dense frictional bed amplifies them
     # by e every two steps, the same in either kernel); a thin skin for frequent rebuilds
     kw = dict(dim=dim, dt=2e-6 if calm else 1e-5, skin=0.00005 if calm else 0.0008,
-              dtype=dtype, pair_kernel=kernel, conduction=cond, rotation=rotation,
+              dtype=dtype, position_dtype=position_dtype, pair_kernel=kernel,
+              conduction=cond, rotation=rotation,
               friction_heat=friction_heat(part) if callable(friction_heat) else friction_heat)
     if dim == 3:
-        kw["periodic_length"] = 4 * a
+        kw["periodic_length"] = layers * a
     if calm:  # 50 g: the bed forms within the few hundred steps of a test
         kw["gravity"] = np.array([0.0, -500.0, 0.0][:dim])
     dem = make_dem(part, walls, params, **kw)
     if kernel == "cpu":  # the state comes from the JAX twin
         return dem, None
     # the state as DEM.init makes it, without its force evaluation (one compilation less)
-    pos = jnp.asarray(pts, dtype)
+    pos = jnp.asarray(pts, position_dtype or dtype)
     nbrs = dem.neighbor.allocate(pos, (4 if dim == 2 else 8) * n, dem.cell_capacity)
     xi = lambda *shape: jnp.asarray(rng.uniform(-1, 1, shape) * 1e-5 * (not calm), dtype)  # noqa
     wshape = (n, 3) if dim == 3 else (n,)
@@ -101,7 +105,7 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
         position=pos, velocity=jnp.asarray(rng.normal(0.0, 0.002 if calm else 0.05, (n, dim)),
                                            dtype),
         angular_velocity=jnp.asarray(rng.normal(0.0, 2.0 if calm else 20.0, wshape), dtype),
-        force=jnp.zeros_like(pos), torque=jnp.zeros(wshape, dtype),
+        force=jnp.zeros(pos.shape, dtype), torque=jnp.zeros(wshape, dtype),
         time=jnp.asarray(0.0, jnp.float64), step=jnp.asarray(0, jnp.int32), nbrs=nbrs,
         pair_spring=xi(nbrs.idx.shape[1], dim), wall_spring=xi(n, len(walls), dim),
         n_rebuilds=jnp.asarray(0, jnp.int32), max_overlap=jnp.asarray(0.0, dtype),
@@ -174,6 +178,35 @@ def test_one_step_equals_the_jax_kernel(dim, dtype, law, tol):
     q0 = heat_flow(st.extra, ca, jdem.particles.radius, law, jdem.conduction.coefficient)
     more = np.sum(~np.isclose(np.asarray(q0), np.asarray(a[6]), rtol=1e-6, atol=0))
     assert more > 5 if (law == "projected" and tol > 0) else more == 0
+
+
+@needs_kernel
+def test_mixed_precision_equals_the_jax_kernel():
+    """Mixed precision (float64 positions, float32 mechanics): both kernels read the positions
+    folded along the periodic axis (ContactForces.pair_positions) and agree to float32's
+    round-off, pairs across a fold included; 17 lattice layers make the slice long enough to
+    fold (twice its cross-section)."""
+    jdem, st = _bed(3, jnp.float32, "jax", "projected", 0.05, layers=17,
+                    position_dtype=jnp.float64)
+    cdem, _ = _bed(3, jnp.float32, "cpu", "projected", 0.05, layers=17,
+                   position_dtype=jnp.float64)
+    assert st.position.dtype == jnp.float64 and jdem.fold_length is not None
+    length = float(jdem.neighbor.periodic_length)
+    assert length / jdem.fold_length == pytest.approx(round(length / jdem.fold_length))
+    a, b = _forces(jdem, st), _forces(cdem, st)
+    ca, cb = a[4], b[4]
+    np.testing.assert_array_equal(np.asarray(ca.pair_mask), np.asarray(cb.pair_mask))
+    for what, x, y in [("force", a[0], b[0]), ("torque", a[1], b[1]),
+                       ("pair springs", a[2], b[2]), ("wall springs", a[3], b[3])]:
+        _close(x, y, REL[jnp.float32], what)
+        assert x.dtype == y.dtype == jnp.float32, what
+    for f in ("pair_overlap", "pair_distance", "pair_normal_force"):
+        _close(getattr(ca, f), getattr(cb, f), REL[jnp.float32], f)
+    _close(a[6], b[6], REL[jnp.float32], "heat flow")
+    # touching pairs whose folded coordinates lie on either side of a fold
+    z = np.mod(np.asarray(st.position[:, 2]), jdem.fold_length)
+    i, j = (np.asarray(x)[np.asarray(ca.pair_mask)] for x in (ca.pair_i, ca.pair_j))
+    assert np.sum(np.abs(z[i] - z[j]) > 0.5 * jdem.fold_length) > 5
 
 
 @needs_kernel

@@ -37,6 +37,7 @@ from drumheat.mechanics.contact_forces import (
     rolling_torque,
 )
 from drumheat.mechanics.dissipation import ContactWork, Dissipation, FrictionHeat, step_heat
+from drumheat.mechanics.neighbors import make_displacement
 
 __all__ = ["Contacts", "ForceResult", "ContactForces", "JaxContactForces", "CpuContactForces",
            "KernelWork", "make_contact_forces"]
@@ -181,9 +182,14 @@ class ContactForces:
     def __init__(self, particles, walls, params: ContactParams, *, dim: int, dt: float, dtype,
                  gravity, displacement, rotation: bool, conduction: PairConduction | None,
                  conduction_gap: tuple[float, float], periodic_length=None,
-                 friction_heat: FrictionHeat | None = None):
+                 friction_heat: FrictionHeat | None = None, fold_length=None):
         self.n, self.dim, self.walls, self.n_w = particles.n, dim, tuple(walls), len(walls)
         self.params, self.dtype, self.rotation = params, dtype, rotation
+        # mixed precision (positions wider than the mechanics): the pair law reads positions
+        # folded along the periodic axis to this period (pair_positions)
+        self.fold_length = fold_length
+        if fold_length is not None:
+            displacement = make_displacement(dim, fold_length)
         self.radius = particles.radius.astype(dtype)
         self.mass = particles.mass.astype(dtype)
         self.inertia = particles.inertia.astype(dtype)
@@ -211,6 +217,19 @@ class ContactForces:
         torque = jnp.zeros_like(w)
         return self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
                               temperature)
+
+    def pair_positions(self, pos):
+        """The positions the pair law reads: ``pos`` itself where it is in the mechanics'
+        type; positions kept wider (mixed precision, :mod:`drumheat.mechanics.precision`)
+        folded along the periodic axis into ``[0, fold_length)`` and then rounded to the
+        mechanics' type. ``fold_length`` divides the period, so the pair separations (minimum
+        image in ``fold_length``, :attr:`displacement`) are those of the unfolded positions,
+        resolved to the spacing at ``fold_length`` instead of at the whole period."""
+        if pos.dtype == self.dtype:
+            return pos
+        if self.fold_length is not None:
+            pos = pos.at[:, -1].set(jnp.mod(pos[:, -1], self.fold_length))
+        return pos.astype(self.dtype)
 
     def at(self, state) -> ForceResult:
         """The forces at a :class:`~drumheat.mechanics.DEMState` with its own velocities
@@ -251,6 +270,7 @@ class ContactForces:
         """Neighbour pairs within the conduction gap (``conduction_gap``), from the positions."""
         valid = i < self.n
         ii, jj = jnp.where(valid, i, 0), jnp.where(valid, j, 0)
+        pos = self.pair_positions(pos)
         d = self.displacement(pos[jj], pos[ii])
         dist = jnp.sqrt(jnp.sum(d * d, axis=-1))
         ri, rj = self.radius[ii], self.radius[jj]
@@ -322,7 +342,7 @@ class JaxContactForces(ContactForces):
         n, gap_pp, radius = self.n, self.gap_pp, self.radius
         i, j = nbrs.idx[0], nbrs.idx[1]
         force, torque, new_spring, ovl, dist, fn, active, max_ovl, pair_work = self._pairs(
-            pos, vel, w, nbrs, pair_spring, force, torque, i, j)
+            self.pair_positions(pos), vel, w, nbrs, pair_spring, force, torque, i, j)
         pair_dist = dist  # every pair's, for the conduction gap tolerance (heat_flow)
         p_cond = active
         if gap_pp > 0:
@@ -502,8 +522,8 @@ class CpuContactForces(ContactForces):
         self._kernel = cpu_kernel
         # the C++ kernel's contact tables, wall spins, dt, period and rotation flag
         self._kernel_params = cpu_kernel.kernel_params(
-            self.params, self.n_w, self.dtype, self.dt, self.wall_omega, self.periodic_length,
-            self.rotation)
+            self.params, self.n_w, self.dtype, self.dt, self.wall_omega,
+            self.fold_length or self.periodic_length, self.rotation)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
                   temperature) -> ForceResult:
@@ -519,8 +539,8 @@ class CpuContactForces(ContactForces):
                                                                    t - self.dt)[0]
         (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, p_cond,
          pair_rows, wall_rows, rates) = self._kernel.contacts(
-            pos, vel, w, self.radius, self.mass, self.inertia, self.ptype, nbrs.idx,
-            pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
+            self.pair_positions(pos), vel, w, self.radius, self.mass, self.inertia, self.ptype,
+            nbrs.idx, pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
             pair_gap=self.gap_pp, order=nbrs.order)
         active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)

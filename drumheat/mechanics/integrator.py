@@ -68,7 +68,7 @@ from drumheat.mechanics.errors import (
 from drumheat.mechanics.forces import ContactForces, Contacts, make_contact_forces
 from drumheat.mechanics.neighbors import (PEC, NeighborSetup, make_neighbor_setup, pair_sources,
                                           sort_pairs, take_pair_data)
-from drumheat.mechanics.precision import PositionResolution, position_resolution
+from drumheat.mechanics.precision import PositionResolution, fold_length, position_resolution
 from drumheat.models.soft_sphere import STICKING_CONTACTS, default_time_step
 
 __all__ = [
@@ -255,7 +255,9 @@ class DEM:
     """A composed DEM system. Build with :func:`make_dem`.
 
     Attributes: dt (s), t_crit (s), m_min (kg), k_max (N/m), dim, walls (tuple of primitives),
-    particles, params, neighbor (NeighborSetup), dtype, gravity (m/s^2 vector),
+    particles, params, neighbor (NeighborSetup), dtype (the mechanics'), position_dtype (the
+    stored positions'; wider than dtype: mixed precision), fold_length (the period the contact
+    law folds a periodic axis to with mixed precision, or None), gravity (m/s^2 vector),
     max_overlap (fraction of the smaller radius that stops a run).
     Functions: :meth:`init`, :meth:`step`, :meth:`run`, :meth:`run_steps`, :meth:`contacts`,
     :meth:`energies`, :meth:`reallocate`, :meth:`adopt`, :meth:`position_resolution`.
@@ -293,6 +295,8 @@ class DEM:
     step_fn: Optional[Callable] = None
     run_steps_fn: Optional[Callable] = None
     conduction: Optional[PairConduction] = None
+    position_dtype: Any = None
+    fold_length: Optional[float] = None
 
     def position_resolution(self) -> PositionResolution:
         """What the mechanics' float type resolves in this DEM's domain: the position spacing
@@ -305,7 +309,8 @@ class DEM:
         if self.neighbor.periodic_length is not None:
             inset[-1] = float(np.max(radius))
         return position_resolution(self.dtype, self.domain_lo + inset, self.domain_hi - inset,
-                                   self.dt, self.m_min, self.k_max, self.gravity)
+                                   self.dt, self.m_min, self.k_max, self.gravity,
+                                   self.position_dtype, self.fold_length)
 
     # -- construction of states --------------------------------------------------------------
 
@@ -321,11 +326,11 @@ class DEM:
         """
         dt_ = self.dtype
         n = self.particles.n
-        pos = jnp.asarray(position, dtype=dt_)
+        pos = jnp.asarray(position, dtype=self.position_dtype or dt_)
         if pos.shape != (n, self.dim):
             raise ValueError(f"position must have shape ({n}, {self.dim}), got {pos.shape}")
         pos = self._wrap(pos)
-        vel = jnp.zeros_like(pos) if velocity is None else jnp.asarray(velocity, dt_)
+        vel = jnp.zeros(pos.shape, dt_) if velocity is None else jnp.asarray(velocity, dt_)
         wshape = (n,) if self.dim == 2 else (n, 3)
         w = (jnp.zeros(wshape, dt_) if angular_velocity is None
              else jnp.asarray(angular_velocity, dt_).reshape(wshape))
@@ -338,7 +343,7 @@ class DEM:
         n_w = len(self.walls)
         state = DEMState(
             position=pos, velocity=vel, angular_velocity=w,
-            force=jnp.zeros_like(pos), torque=jnp.zeros(wshape, dt_),
+            force=jnp.zeros(pos.shape, dt_), torque=jnp.zeros(wshape, dt_),
             time=jnp.asarray(time, dtype=jnp.float64 if jax.config.jax_enable_x64 else dt_),
             step=jnp.asarray(0, jnp.int32), nbrs=nbrs,
             pair_spring=jnp.zeros((cap, self.dim), dt_),
@@ -726,23 +731,28 @@ def _checked_time_step(mass, params, dt, safety_factor, rotation):
     return dt, t_crit, m_min, k_max
 
 
-def _warn_coarse_positions(res: PositionResolution) -> None:
-    """Warn (:class:`DEMAccuracyWarning`) where the mechanics' float type cannot resolve the
+def _warn_coarse_positions(res: PositionResolution, periodic: bool) -> None:
+    """Warn (:class:`DEMAccuracyWarning`) where the contact law's float type cannot resolve the
     overlap under a particle's own weight in the domain (:mod:`drumheat.mechanics.precision`)."""
     ratio = res.spacing_over_weight_overlap
     if ratio is None or ratio < 1.0:
         return
     axis = int(np.argmax(res.spacing))
+    drift = ""
+    if res.positions == res.dtype:
+        drift = (f", and a particle slower than {res.slowest_speed[axis]:.2g} m/s along that "
+                 "axis does not move along it in a step")
+    remedy = "float64 ([dem] precision = \"float64\")"
+    if periodic and axis == len(res.spacing) - 1 and res.positions == res.dtype:
+        remedy += " or mixed precision (\"mixed\": float64 positions, the rest float32)"
     warnings.warn(
-        f"{res.dtype} mechanics resolve positions in this domain only to "
-        f"{res.spacing[axis]:.2g} m (the spacing of {res.dtype} at the domain's largest "
-        f"coordinate, along {'xyz'[axis]}), {ratio:.2g} times the overlap under a particle's own "
+        f"The {res.dtype} contact law resolves positions in this domain only to "
+        f"{res.spacing[axis]:.2g} m (the spacing of {res.dtype} at the largest coordinate it "
+        f"reads, along {'xyz'[axis]}), {ratio:.2g} times the overlap under a particle's own "
         f"weight, m g / k_n = {res.weight_overlap:.2g} m: resting contacts cannot represent "
-        "the force that carries one particle, and a particle slower than "
-        f"{res.slowest_speed[axis]:.2g} m/s along that axis does not move along it in a step "
-        "(drumheat.mechanics.precision; docs/performance.md, precision). Run the mechanics in "
-        "float64 ([dem] precision = \"float64\"), or compare with a float64 run before using "
-        "the results.", DEMAccuracyWarning,
+        f"the force that carries one particle{drift} (drumheat.mechanics.precision; "
+        f"docs/performance.md, precision). Run the mechanics in {remedy}, or compare with a "
+        "float64 run before using the results.", DEMAccuracyWarning,
         stacklevel=2)  # make_dem's line: a scene builds several DEMs (pour, run), one line shows
 
 
@@ -797,6 +807,7 @@ def make_dem(
     bounds=None,
     skin: Optional[float] = None,
     dtype=jnp.float64,
+    position_dtype=None,
     capacity_multiplier: float = 1.5,
     always_rebuild: bool = False,
     max_overlap: float = 0.5,
@@ -828,9 +839,15 @@ def make_dem(
       bounds: ``(lo, hi)`` of the domain (m); default from the walls (e.g. the drum shell).
       skin: neighbour-list skin (m); default 0.5 x the largest radius (cutoff 2 r_max + skin).
       dtype: float dtype of the mechanics (float32 or float64); time stays float64. The
-        positions are kept in it too: where its spacing at the domain's largest coordinate
+        positions are kept in it too (unless ``position_dtype`` says otherwise): where the
+        spacing of the coordinates the contact law reads, at their largest,
         reaches the overlap under a particle's own weight (float32 in a long periodic slice),
         a :class:`DEMAccuracyWarning` says so (:mod:`drumheat.mechanics.precision`).
+      position_dtype: float dtype of the stored positions; default ``dtype``. float64 with
+        float32 mechanics is mixed precision: the drift adds to float64 positions and the
+        contact law reads them folded along a periodic axis and rounded to float32
+        (:mod:`drumheat.mechanics.precision`), so a long periodic slice keeps the resolution
+        of its cross-section. Not narrower than ``dtype``.
       always_rebuild: rebuild the neighbour list every step (for testing the history remap).
       max_overlap: overlap / smaller radius that stops a run (default 0.5, PFC's stated
         assumption, Weigler digest sec. 4 [2.4]).
@@ -924,11 +941,22 @@ def make_dem(
     periodic_axis = dim - 1 if periodic_length is not None else None
 
     dtype = jnp.dtype(dtype)
+    position_dtype = dtype if position_dtype is None else jnp.dtype(position_dtype)
+    if (dtype not in (jnp.float32, jnp.float64) or position_dtype not in (jnp.float32, jnp.float64)
+            or position_dtype.itemsize < dtype.itemsize):
+        raise ValueError(f"dtype and position_dtype must be float32 or float64, the positions "
+                         f"not narrower than the mechanics; got {dtype.name} and "
+                         f"{position_dtype.name}")
+    fold = None
+    if position_dtype != dtype:
+        cross = np.max(np.maximum(np.abs(dom_lo), np.abs(dom_hi))[:dim - 1 if periodic_length
+                                                                  else dim])
+        fold = fold_length(periodic_length, cross, neighbor.cutoff)
     forces = make_contact_forces(
         pair_kernel, particles, walls, params, batch_axis=batch_axis, dim=dim, dt=dt,
         dtype=dtype, gravity=gravity, displacement=neighbor.displacement, rotation=rotation,
         conduction=conduction, conduction_gap=(gap_pp, gap_pw), periodic_length=periodic_length,
-        friction_heat=friction_heat)
+        friction_heat=friction_heat, fold_length=fold)
     step, run_steps, energies = _velocity_verlet(
         forces, neighbor, dt=dt, skin=skin, periodic_length=periodic_length, rotation=rotation,
         always_rebuild=always_rebuild, batch_axis=batch_axis, external_force=external_force,
@@ -942,6 +970,7 @@ def make_dem(
         _energies=_jit(energies), _run_chunk=_jit(run_steps, donate=True),
         default_chunk=int(chunk), conduction=conduction,
         cell_capacity=cell_cap, _external=external_force, step_fn=step, run_steps_fn=run_steps,
+        position_dtype=position_dtype, fold_length=fold,
     )
-    _warn_coarse_positions(dem.position_resolution())
+    _warn_coarse_positions(dem.position_resolution(), periodic_length is not None)
     return dem

@@ -231,6 +231,7 @@ class DEMBed(DEMMotion):
         self.dim = scene.dim
         self.periodic = scene.drum.depth if scene.dim == 3 else None
         self.gravity, self.dtype, self.t_crit = setup.gravity, setup.dtype, setup.t_crit
+        self.position_dtype = setup.position_dtype
         self.t_out = assemble.output_times(scene)
         out_iv = scene.run.output_interval
         unit = cfg.record_interval if cfg.record_interval is not None else out_iv
@@ -275,7 +276,8 @@ class DEMBed(DEMMotion):
                                      wall_ids=self.wall_ids, friction=friction is not None)
         return make_dem(self.mech, self.walls, self.params, dim=self.dim, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.periodic,
-                        skin=self.scene.dem.skin, dtype=self.dtype, extra_update=update,
+                        skin=self.scene.dem.skin, dtype=self.dtype,
+                        position_dtype=self.position_dtype, extra_update=update,
                         chunk=self.steps_per_record or self.steps_per_output,
                         batch_axis=batch_axis, conduction_gap=self.setup.conduction_gap,
                         pair_kernel=self.contact_backend(batch_axis is not None).backend,
@@ -296,7 +298,8 @@ class DEMBed(DEMMotion):
 
         dem = make_dem(self.mech, walls_at_rest(self.walls), self.params, dim=self.dim,
                        dt=self.dt, gravity=self.gravity, periodic_length=self.periodic,
-                       skin=self.scene.dem.skin, dtype=self.dtype)
+                       skin=self.scene.dem.skin, dtype=self.dtype,
+                       position_dtype=self.position_dtype)
         steps = max(1, int(round(self.scene.dem.settle_time / self.dt)))
         state = dem.run(dem.init(pos0), steps)
         return np.asarray(state.position, float)
@@ -504,7 +507,8 @@ class DEMBed(DEMMotion):
                 [(float(w.radius), float(w.rpm)) for w in self.walls],
                 tuple(self.wall_heated)),
             "the DEM set-up (gravity, precision, skin, periodic length)": (
-                tuple(self.gravity), str(self.dtype), self.scene.dem.skin, self.periodic),
+                tuple(self.gravity), (str(self.dtype), str(self.position_dtype)),
+                self.scene.dem.skin, self.periodic),
         })
 
     def align(self, states):

@@ -112,6 +112,7 @@ class MovingBed(DEMMotion):
         self.wall_heated = np.array([w.temperature is not None for w in self.walls])
         self.params, self.k_n, self.mech = setup.params, setup.k_n, setup.particles
         self.gravity, self.dtype, self.t_crit = setup.gravity, setup.dtype, setup.t_crit
+        self.position_dtype = setup.position_dtype
         d_max = float(self.diameter.max())
         self.d_max = d_max
         xw = self.geometry.half_width
@@ -193,7 +194,7 @@ class MovingBed(DEMMotion):
             dem = make_dem(self.mech, closed, self.params, dim=3, dt=self.dt,
                            gravity=self.gravity, periodic_length=h.depth,
                            bounds=(self.bounds[0], hi), skin=self.scene.dem.skin,
-                           dtype=self.dtype)
+                           dtype=self.dtype, position_dtype=self.position_dtype)
             state = dem.run(dem.init(pos), max(1, int(round(h.settle_time / self.dt))))
             pos = np.asarray(state.position, float)
         self._packing = pos
@@ -294,6 +295,7 @@ class MovingBed(DEMMotion):
         return make_dem(self.mech, self.walls, self.params, dim=3, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.hopper.depth,
                         bounds=self.bounds, skin=self.scene.dem.skin, dtype=self.dtype,
+                        position_dtype=self.position_dtype,
                         extra_update=update, boundary_update=self.make_boundary(),
                         chunk=self.steps_per_output, conduction_gap=self.setup.conduction_gap,
                         pair_kernel=self.contact_backend().backend)

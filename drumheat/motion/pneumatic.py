@@ -322,6 +322,7 @@ class PneumaticChannel(DEMMotion):
         self.walls = assemble.channel_walls(scene)
         self.g = cfg.gravity
         self.gravity, self.dtype, self.t_crit = setup.gravity, setup.dtype, setup.t_crit
+        self.position_dtype = setup.position_dtype
         r_max = float(self.radius.max())
         self.skin = cfg.skin if cfg.skin is not None else r_max
         cutoff = 2 * r_max + self.skin
@@ -621,7 +622,8 @@ class PneumaticChannel(DEMMotion):
         cfg = self.scene.dem
         return make_dem(self.mech, self.walls, self.params, dim=3, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.D, bounds=self.bounds,
-                        skin=self.skin, dtype=self.dtype, extra_update=upd,
+                        skin=self.skin, dtype=self.dtype,
+                        position_dtype=self.position_dtype, extra_update=upd,
                         external_force=ext, boundary_update=bnd, chunk=self.steps_per_output,
                         safety_factor=cfg.safety_factor,
                         conduction_gap=self.setup.conduction_gap,

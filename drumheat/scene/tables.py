@@ -596,12 +596,15 @@ class DEMConfig(Table):
             "trajectory then diverges like any chaotic flow). 'cpu' where it cannot serve "
             "falls back to JAX with one warning line; summary.json says which ran "
             "(contact_backend).")
-    precision: str = spec("float64", choices=("float32", "float64"),
-                          doc="Floating-point type of the mechanics, positions included; "
-                              "temperatures are always float64. float32 is quicker but "
-                              "resolves a position only to about 1e-7 of the coordinate: a "
-                              "warning says where that reaches the overlap under a particle's "
-                              "own weight (long periodic slices); summary.json gives the "
+    precision: str = spec("float64", choices=("float32", "float64", "mixed"),
+                          doc="Floating-point type of the mechanics; temperatures are always "
+                              "float64. float32 is quicker but keeps the positions in float32 "
+                              "too, which resolves them only to about 1e-7 of the coordinate: "
+                              "a warning says where that reaches the overlap under a "
+                              "particle's own weight (long periodic slices). 'mixed' keeps "
+                              "the positions in float64 and the rest in float32: the contact "
+                              "law reads the periodic axis folded to the cross-section's size, "
+                              "which removes that limit along it. summary.json gives the "
                               "figures (precision).")
     thermal_substeps: int = spec(1, ge=1,
                                  doc="Mechanical steps per thermal step; each contact's "
