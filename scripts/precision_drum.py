@@ -5,10 +5,12 @@ Usage: python scripts/precision_drum.py [--n 10000 50000] [--warm-seconds 1.0]
        [--seconds 0.5] [--samples 3] [--offset 50] [--probe 20] [--packings DIR]
        [--tile FILE] [--backend auto|cpu|jax] [--compare float32 mixed]
 
-The mechanics store positions in the chosen float type, so float32 resolves a coordinate x
-only to its spacing ulp(x) (2^-23 |x| and less): the coordinates of glass-drum-3d reach
-0.125 m across the drum and the slice's depth (N x 2.6e-5 m) along the periodic axis. Two
-things follow from the set-up alone, printed first for each N and axis:
+float32 mechanics store the positions in float32 too (mixed keeps them in float64, and its
+contact law reads them folded along the axis: drumheat.mechanics.precision), so float32
+resolves a coordinate x only to its spacing ulp(x) (2^-23 |x| and less): the coordinates of
+glass-drum-3d reach 0.125 m across the drum and the slice's depth (N x 2.6e-5 m) along the
+periodic axis. Two things follow from the set-up alone, printed first for each N and axis
+(for float32):
 
 * a drift dt v smaller than half the spacing leaves the coordinate unchanged, so a particle
   slower than ulp / (2 dt) along that axis does not move along it at all in a step;
@@ -20,13 +22,14 @@ things follow from the set-up alone, printed first for each N and axis:
 Then measured, for each N: the scene from its poured bed (``--packings``, as the benchmarks; or,
 with ``--tile FILE``, a poured slice of N0 particles repeated N / N0 times along the periodic
 axis, as ``bench_gpu.py`` does for the GPU sizes) is run ``--warm-seconds`` in float64 (the
-start-up of the turning bed); from there ``--samples`` starts, each ``--offset`` float64 steps after the previous one and its positions moved by random
-1e-13 m (far below anything physical: the flow, which is chaotic, turns it into independent
-samples of the same flow; without the move float64 would retrace the first start's trajectory,
-and float32's rounding erases the move, so its starts differ by the offset), and from each start
-runs of ``--seconds``: float64, and each precision of ``--compare`` (default float32; the
-float64 state put onto that precision's state as a checkpoint is restored: rounded, positions
-kept in float64 with mixed).
+start-up of the turning bed); from there ``--samples`` starts, each ``--offset`` float64 steps
+after the previous one and its positions moved by random 1e-13 m (far below anything physical:
+the flow, which is chaotic, turns it into independent samples of the same flow; without the
+move float64 would retrace the first start's trajectory, and float32's rounding erases the
+move, so its starts differ by the offset), and from each start runs of ``--seconds``: float64,
+and each precision of ``--compare`` (default float32; the float64 state put onto that
+precision's state as a checkpoint is restored: rounded, the positions kept in float64 with
+mixed).
 For each run: the bed's mean temperature rise (the product's answer), the axial mean squared
 displacement (the periodic axis, where float32's spacing is the coarsest), the share of
 particles whose axial coordinate did not change in one step (over ``--probe`` steps at the
