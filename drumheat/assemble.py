@@ -356,7 +356,7 @@ class DEMSetup(NamedTuple):
     gravity: np.ndarray
     density: np.ndarray
     conduction_gap: tuple[float, float]
-    position_dtype: Any = jnp.float64
+    position_dtype: Any
 
 
 def dem_setup(scene: Scene) -> DEMSetup:

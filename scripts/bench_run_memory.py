@@ -24,8 +24,12 @@ writes into a result folder (as ``drumheat run`` does), where it keeps its recor
 (``.log/``); ``--no-folder`` runs without one (``drumheat.run(scene)`` in a notebook), which
 keeps it in memory.
 
+``--precision`` sets the scene's ``dem.precision`` (float64 by default; mixed and float32 keep
+the mechanics' arrays in float32).
+
 Usage: python scripts/bench_run_memory.py --n 10000 50000 [--packings DIR]
        [--duration 0.3] [--replay-after 0.2] [--record-interval S] [--no-folder]
+       [--precision float64|mixed|float32]
 The packings are ``bench_vs_liggghts.py``'s (poured there the first time).
 """
 
@@ -67,7 +71,7 @@ def phase_of(frame) -> str:
 
 
 def measure(n: int, duration: float, replay_after: float, packings, record_interval=None,
-            folder: bool = True) -> dict:
+            folder: bool = True, precision: str = "float64") -> dict:
     """Run the scene in this process and return the peaks per phase (MB) and the summary's."""
     from bench_vs_liggghts import scene_for, scene_packing
 
@@ -78,7 +82,7 @@ def measure(n: int, duration: float, replay_after: float, packings, record_inter
             "dem.replay_after": replay_after, "dem.replay_cycle": replay_after / 2}
     if record_interval is not None:
         over["dem.record_interval"] = record_interval
-    scene = scene_for(n, "auto", packing).with_overrides(over)
+    scene = scene_for(n, "auto", packing, precision).with_overrides(over)
     main = threading.main_thread()
     peaks, anon, current, done = {}, {}, ["start"], threading.Event()
 
@@ -120,15 +124,17 @@ def main():
                     help="dem.record_interval, s (default: the scene's)")
     ap.add_argument("--no-folder", action="store_true",
                     help="run without a result folder (the recording stays in memory)")
+    ap.add_argument("--precision", default="float64", choices=["float64", "mixed", "float32"],
+                    help="the scene's dem.precision")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
         print(json.dumps(measure(args.child, args.duration, args.replay_after, args.packings,
-                                 args.record_interval, not args.no_folder)))
+                                 args.record_interval, not args.no_folder, args.precision)))
         return
     rec = (f"recording every {args.record_interval:g} s" if args.record_interval
            else "the scene's recording interval")
-    print(f"glass-drum-3d, {args.duration:g} s simulated, replay after {args.replay_after:g} s, "
+    print(f"glass-drum-3d, {args.precision} mechanics, {args.duration:g} s simulated, replay after {args.replay_after:g} s, "
           f"{rec}, {'no result folder' if args.no_folder else 'into a result folder'}: the "
           "resident memory's peak in each phase above the resident memory before the run "
           "(imports), MB; last rows: the slope between successive N, kB per particle")
@@ -137,7 +143,7 @@ def main():
     for n in args.n:
         env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="1048576")
         cmd = [sys.executable, __file__, "--child", str(n), "--duration", str(args.duration),
-               "--replay-after", str(args.replay_after)]
+               "--replay-after", str(args.replay_after), "--precision", args.precision]
         if args.packings:
             cmd += ["--packings", args.packings]
         if args.record_interval:
