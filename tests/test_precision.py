@@ -119,7 +119,7 @@ def test_fold_length_divides_the_period():
 def _pair_along_the_axis(dtype, position_dtype, z0, overlap):
     """The normal force of two particles touching along the periodic axis at z0 of a 1.3 m
     slice (no gravity, at rest), and the DEM."""
-    dem, caught = _drum(1.3, dtype, gravity=[0.0, 0.0, 0.0], position_dtype=position_dtype)
+    dem, _ = _drum(1.3, dtype, gravity=[0.0, 0.0, 0.0], position_dtype=position_dtype)
     pos = np.array([[0.0, -0.05, z0], [0.0, -0.05, z0 + 2 * RP - overlap]])
     state = dem.init(pos)
     return float(np.asarray(state.force, np.float64)[1, 2]), dem
@@ -148,8 +148,7 @@ def test_mixed_precision_moves_a_slow_particle():
     float32's slowest speed: with the positions in float64 it drifts dt v per step."""
     dem32, _ = _drum(1.3, jnp.float32, n=1, gravity=[0.0, 0.0, 0.0])
     v = 0.9 * float(dem32.position_resolution().slowest_speed[2])
-    dem, caught = _drum(1.3, jnp.float32, n=1, gravity=[0.0, 0.0, 0.0],
-                        position_dtype=jnp.float64)
+    dem, _ = _drum(1.3, jnp.float32, n=1, gravity=[0.0, 0.0, 0.0], position_dtype=jnp.float64)
     state = dem.init(np.array([[0.0, -0.05, 1.2]]), velocity=np.array([[0.0, 0.0, v]]))
     out = dem.run(state, 50, chunk=50)
     assert out.position.dtype == jnp.float64 and out.velocity.dtype == jnp.float32
