@@ -134,7 +134,8 @@ def main():
         return
     rec = (f"recording every {args.record_interval:g} s" if args.record_interval
            else "the scene's recording interval")
-    print(f"glass-drum-3d, {args.precision} mechanics, {args.duration:g} s simulated, replay after {args.replay_after:g} s, "
+    print(f"glass-drum-3d, {args.precision} mechanics, {args.duration:g} s simulated, replay "
+          f"after {args.replay_after:g} s, "
           f"{rec}, {'no result folder' if args.no_folder else 'into a result folder'}: the "
           "resident memory's peak in each phase above the resident memory before the run "
           "(imports), MB; last rows: the slope between successive N, kB per particle")

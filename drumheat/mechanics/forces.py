@@ -37,7 +37,6 @@ from drumheat.mechanics.contact_forces import (
     rolling_torque,
 )
 from drumheat.mechanics.dissipation import ContactWork, Dissipation, FrictionHeat, step_heat
-from drumheat.mechanics.neighbors import make_displacement
 
 __all__ = ["Contacts", "ForceResult", "ContactForces", "JaxContactForces", "CpuContactForces",
            "KernelWork", "make_contact_forces"]
@@ -186,10 +185,9 @@ class ContactForces:
         self.n, self.dim, self.walls, self.n_w = particles.n, dim, tuple(walls), len(walls)
         self.params, self.dtype, self.rotation = params, dtype, rotation
         # mixed precision (positions wider than the mechanics): the pair law reads positions
-        # folded along the periodic axis to this period (pair_positions)
+        # folded along the periodic axis to this period (pair_positions), and ``displacement``
+        # takes the minimum image in it
         self.fold_length = fold_length
-        if fold_length is not None:
-            displacement = make_displacement(dim, fold_length)
         self.radius = particles.radius.astype(dtype)
         self.mass = particles.mass.astype(dtype)
         self.inertia = particles.inertia.astype(dtype)

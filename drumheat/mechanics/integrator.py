@@ -66,8 +66,9 @@ from drumheat.mechanics.errors import (
     ParticleEscapeError,
 )
 from drumheat.mechanics.forces import ContactForces, Contacts, make_contact_forces
-from drumheat.mechanics.neighbors import (PEC, NeighborSetup, make_neighbor_setup, pair_sources,
-                                          sort_pairs, take_pair_data)
+from drumheat.mechanics.neighbors import (PEC, NeighborSetup, make_displacement,
+                                          make_neighbor_setup, pair_sources, sort_pairs,
+                                          take_pair_data)
 from drumheat.mechanics.precision import PositionResolution, fold_length, position_resolution
 from drumheat.models.soft_sphere import STICKING_CONTACTS, default_time_step
 
@@ -947,14 +948,14 @@ def make_dem(
         raise ValueError(f"dtype and position_dtype must be float32 or float64, the positions "
                          f"not narrower than the mechanics; got {dtype.name} and "
                          f"{position_dtype.name}")
-    fold = None
+    fold = None  # mixed precision: the period the pair law folds the periodic axis to
     if position_dtype != dtype:
-        cross = np.max(np.maximum(np.abs(dom_lo), np.abs(dom_hi))[:dim - 1 if periodic_length
-                                                                  else dim])
+        cross = float(np.max(np.abs([dom_lo[:-1], dom_hi[:-1]])))  # the axes across a slice
         fold = fold_length(periodic_length, cross, neighbor.cutoff)
     forces = make_contact_forces(
         pair_kernel, particles, walls, params, batch_axis=batch_axis, dim=dim, dt=dt,
-        dtype=dtype, gravity=gravity, displacement=neighbor.displacement, rotation=rotation,
+        dtype=dtype, gravity=gravity, rotation=rotation,
+        displacement=neighbor.displacement if fold is None else make_displacement(dim, fold),
         conduction=conduction, conduction_gap=(gap_pp, gap_pw), periodic_length=periodic_length,
         friction_heat=friction_heat, fold_length=fold)
     step, run_steps, energies = _velocity_verlet(
