@@ -437,24 +437,29 @@ DRUMHEAT_VECTOR_CLONES void pair_law_tile(Tile<S, D>& t, int cnt, S dt) {
 }
 
 // What the scan finds for a block of pair slots (Loop::pairs): for each, d from i to j (the
-// nearest periodic image of the last axis), |d|^2 and whether the pair lies within reach.
+// nearest periodic image of the last axis), |d|^2, whether the pair lies within reach and
+// whether it conducts (output 11).
 template <typename S, int D>
 struct Block {
   static constexpr int N = 256;
   alignas(64) S d[D][N], dist2[N];
-  alignas(64) unsigned char within[N];
+  alignas(64) unsigned char within[N], cd[N];
 };
 
 // The Block of the pair slots k of (pi, pj) [0, cnt): d from i to j (the nearest periodic image
 // of the last axis with PERIODIC; with RANKED the partners' data read at their ranks rk) and
-// |d|^2, and whether the pair lies within reach, i.e. its centre distance |d| is at most the
-// bound r_i + r_j + max(gap, cg) beyond which it can neither touch, conduct across the gap
-// (gap = gapf d_min, gapf the conduction gap tolerance, 0 without one) nor count in output 11
-// (cg = cgap d_min): the exact tests of Loop::tile (on the overlap, as the JAX kernel decides)
-// cannot pass beyond it (the factor 1.0001 on the squares keeps round-off on the safe side).
-// 0 for a padding slot (i >= n). One loop without branches over the slots, in vector
-// instructions: the partners' data are read for every listed pair here, and about three in
-// four lie out of reach in a turning bed.
+// |d|^2, whether the pair lies within reach, i.e. its centre distance |d| is at most the bound
+// r_i + r_j + gap beyond which it can neither touch nor conduct heat in this loop (gap = gapf
+// d_min, gapf the conduction gap tolerance of the heat flow, 0 without one): the exact tests
+// of Loop::tile (on the overlap, as the JAX kernel decides) cannot pass beyond it (the factor
+// 1.0001 on the squares keeps round-off on the safe side); and output 11, whether the pair
+// conducts: it overlaps, or with cgap > 0 its overlap is at least -cgap d_min (the test of
+// forces.ContactForces.pair_gap_mask, on the overlap computed as Loop::tile computes it). That
+// test needs only the distance and the radii, so it is made here for every slot, and a pair
+// within the gap cgap that does not touch is not gathered into a tile (in the built-in drum
+// about as many pairs lie within the gap as touch). 0 for a padding slot (i >= n). One loop
+// without branches over the slots, in vector instructions: the partners' data are read for
+// every listed pair here, and most lie out of reach in a turning bed.
 template <typename S, int D, bool PERIODIC, bool RANKED>
 DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int32_t* __restrict pj,
                                          int cnt, const S* __restrict x, const S* __restrict r,
@@ -472,10 +477,12 @@ DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int
     const S ri = r[i], rj = r[j];
     const S rmin = ri < rj ? ri : rj;
     const S gap = gapf*(S(2)*rmin), cg = cgap*(S(2)*rmin);
-    const S re = (ri + rj) + (gap > cg ? gap : cg);
+    const S re = (ri + rj) + gap;
     for (int c = 0; c < D; ++c) b.d[c][k] = d[c];
     b.dist2[k] = dist2;
     b.within[k] = real & !(dist2 > re*re*S(1.0001));
+    const S ov = (ri + rj) - std::sqrt(dist2);
+    b.cd[k] = real & (cgap > S(0) ? ov >= -cg : ov > S(0));
   }
 }
 
@@ -675,9 +682,9 @@ struct Loop {
   }
 
   // The pair slots [k0, k1) in blocks of BLOCK slots, two passes per block. The scan tells
-  // which slots lie within reach (within_reach, in vector instructions), writes every slot's
-  // outputs as for a pair that does not touch (zeros, the spring cleared, with friction heat the
-  // opened contact's row) and collects the slots within reach in a short list (a slot's index
+  // which slots lie within reach and which conduct (within_reach, in vector instructions),
+  // writes every slot's outputs as for a pair that does not touch (zeros, the spring cleared,
+  // with friction heat the opened contact's row) and collects the slots within reach in a short list (a slot's index
   // written and the count advanced by the flag: no branch on the geometry, so the processor does
   // not mispredict on the many listed pairs out of reach); `tile` then computes the list, Tile::N
   // slots at a time, while its slots are still in the cache.
@@ -706,9 +713,10 @@ struct Loop {
                                               cgap, *bl);
       }
       // zero where nothing touches (written here, while the lines are at hand: a sweep over
-      // the whole output first would pass them through the cache twice where they do not fit)
+      // the whole output first would pass them through the cache twice where they do not fit),
+      // and which pairs conduct, for every slot
       for (int64_t k = b0; k < b1; ++k) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
-      for (int64_t k = b0; k < b1; ++k) CD[k] = false;
+      for (int64_t k = b0; k < b1; ++k) CD[k] = bl->cd[k - b0];
       if (fh) for (int64_t k = KP*b0; k < KP*b1; ++k) PW[k] = S(0);
       int64_t cnt = 0;
       for (int q = 0; q < nb; ++q) {
@@ -767,7 +775,6 @@ struct Loop {
       const S ov = t.ov[q], dist = t.dist[q];
       S* s = Sn + D*k;
       S* hw = fh ? PW + KP*k : nullptr;  // friction heat row (header)
-      CD[k] = cgap > S(0) ? ov >= -(cgap*(S(2)*rmin)) : ov > S(0);  // without a gap: overlap
       if (!(ov > S(0))) {
         if (fh) opened<S>(Law<S>{t.kn[q], t.kt[q]}, t.ov0[q], t.xi2[q], hw + KP - 1, R);
         clear<S, D>(s);
