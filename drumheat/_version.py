@@ -4,4 +4,6 @@
 # checkpoint of dev0 would be read wrongly: its version refuses it
 # dev2: a coupled run that records no contacts carries no recording accumulators (a state of
 # another layout): a checkpoint of dev1 is refused
-__version__ = "0.2.0.dev2"
+# dev3: the coupled heat's contact times are whole DEM steps (int32) instead of float64
+# seconds: a checkpoint of dev2 is refused
+__version__ = "0.2.0.dev3"

@@ -80,7 +80,8 @@ def test_resting_dem_bed_matches_the_static_model(gap):
     T = T0 + jnp.linspace(0.0, 3.0, 30)  # every contact carries heat
     dem = bed.make_dem(model)
     state = dem.init(bed.packing_positions())
-    state = state._replace(extra=initial_extra(model, T, state.nbrs.idx.shape[1], 30, 1))
+    state = state._replace(extra=initial_extra(model, T, state.nbrs.idx.shape[1], 30, 1,
+                                                bed.dt))
     state = dem.run(state, 2000)
     c = dem.contacts(state)
     h = bed.dt
@@ -108,7 +109,7 @@ def test_resting_dem_bed_matches_the_static_model(gap):
 
 def test_a_run_that_records_nothing_carries_no_recording_accumulators():
     # without dem.record_interval the coupled state leaves the recording's per-pair and
-    # per-wall-slot accumulators out (one float64 per slot less to carry, remap and fold);
+    # per-wall-slot accumulators out (one int32 per slot less to carry, remap and fold);
     # the temperatures, accounts and contact count are those of a state that carries them,
     # bit for bit, through rebuilds and thermal sub-steps
     from drumheat.motion.coupling import contact_count, initial_extra, recorded_times
@@ -122,7 +123,7 @@ def test_a_run_that_records_nothing_carries_no_recording_accumulators():
     start = dem.init(bed.packing_positions())
     cap = start.nbrs.idx.shape[1]
     runs = [dem.run(start._replace(extra=initial_extra(model, T, cap, 30, len(bed.walls),
-                                                       record=record)), 3001)
+                                                       bed.dt, record=record)), 3001)
             for record in (True, False)]
     assert runs[0].n_rebuilds > 0 and runs[1].extra.rec_wall_time is None
     np.testing.assert_array_equal(runs[0].extra.T, runs[1].extra.T)
@@ -133,6 +134,34 @@ def test_a_run_that_records_nothing_carries_no_recording_accumulators():
     assert float(jnp.sum(recorded_times(runs[0].extra)[0])) > 0
     with pytest.raises(ValueError, match="records no contact times"):
         recorded_times(runs[1].extra)
+
+
+def test_contact_times_are_whole_steps():
+    # the coupled heat counts each pair's and wall slot's conducting steps in int32: after k
+    # steps from a fresh state the recorded times are dt times the number of steps each
+    # contact conducted (pair_conducts / wall_conducts of every step, counted here), exactly,
+    # through the thermal sub-steps' folds; the output interval's count is their sum
+    from drumheat.motion.coupling import contact_count, recorded_times
+
+    bed = make_motion(dem_scene(**{"dem.thermal_substeps": 3, "dem.record_interval": 0.05}))
+    dem = bed.dem
+    state = bed.initial_state()
+    assert state.extra.pair.time.dtype == jnp.int32 == state.extra.wall_time.dtype
+    pairs, walls = 0, 0
+    for _ in range(8):  # two thermal steps and two steps after
+        state, c = dem.step(state)
+        pairs = pairs + np.asarray(c.pair_conducts, np.int64)
+        walls = walls + np.asarray(c.wall_conducts, np.int64)
+    assert int(state.n_rebuilds) == 0  # the slots stayed the same pairs
+    assert pairs.max() == 8 and walls.max() == 8  # lasting contacts among them
+    pt, wt = recorded_times(state.extra)
+    assert pt.dtype == jnp.float64
+    np.testing.assert_array_equal(np.asarray(pt), pairs * bed.dt)
+    np.testing.assert_array_equal(np.asarray(wt), walls * bed.dt)
+    count = contact_count(state.extra, bed.wall_heated)
+    heated = np.tile(np.asarray(bed.wall_heated, bool), bed.n)
+    assert float(count.pair) == pairs.sum() * bed.dt
+    assert float(count.wall) == walls[heated].sum() * bed.dt
 
 
 def test_padding_slots_of_the_thermal_network_add_nothing():

@@ -281,6 +281,27 @@ def test_checkpoint_of_another_state_layout_is_refused(tmp_path, monkeypatch):
         dh.run(dem_scene(), out=out, progress=False, resume=True)
 
 
+def test_checkpoint_array_of_another_kind_is_refused(tmp_path, monkeypatch):
+    """A state array of another kind (the contact times of the coupled heat were float64
+    seconds until 0.2.0.dev3, whole steps in int32 since) is refused instead of being cast
+    (seconds read as step counts)."""
+    out = tmp_path / "run"
+    with monkeypatch.context() as m:
+        kill_at(m, "dem", 2)
+        with pytest.raises(Killed):
+            dh.run(dem_scene(), out=out, progress=False)
+    with np.load(out / "checkpoint.npz") as f:
+        data = {k: f[k] for k in f.files}
+    dyn = eqx.partition(make_motion(dem_scene()).initial_state(), eqx.is_array)[0]
+    paths = [jax.tree_util.keystr(p) for p, _ in jax.tree_util.tree_leaves_with_path(dyn)]
+    k = paths.index(".extra.pair.time")  # the pairs' contact times since the thermal step
+    assert data[f"state/{k}"].dtype == np.int32
+    data[f"state/{k}"] = data[f"state/{k}"] * 1e-5  # as seconds of 1e-5 s steps
+    np.savez(out / "checkpoint.npz", **data)
+    with pytest.raises(ValueError, match="another development version"):
+        dh.run(dem_scene(), out=out, progress=False, resume=True)
+
+
 def test_a_failing_run_keeps_the_earlier_result(tmp_path, monkeypatch):
     scene = load_scene("weigler-static", {"run.duration": 300.0})
     out = tmp_path / "run"

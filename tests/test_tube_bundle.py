@@ -86,7 +86,7 @@ def test_recycling_hook_resets_particle():
     from drumheat.motion.coupling import initial_extra
 
     extra = initial_extra(model, T0, state.nbrs.idx.shape[1], bed.n, bed.n_walls,
-                          per_wall=True, accounts=("inflow",))
+                          bed.dt, per_wall=True, accounts=("inflow",))
     extra = extra.replace(T=extra.T.at[0].set(280.0), flow=bed.initial_flow())
     state = state._replace(extra=extra, velocity=state.velocity.at[0].set([0.1, -0.5, 0.0]),
                            wall_spring=state.wall_spring.at[0].set(1e-4))

@@ -210,7 +210,12 @@ def _like(template, values):
     """``values`` as a device array of the template's dtype and weak type (so that a restored
     state promotes in arithmetic exactly like the original)."""
     template = jax.numpy.asarray(template)
-    values = np.asarray(values).astype(template.dtype, copy=False)  # e.g. float64 -> float32
+    values = np.asarray(values)
+    if values.dtype.kind != template.dtype.kind and values.size:  # float seconds into counts...
+        raise ValueError(f"a checkpoint array of {values.dtype} where this code keeps "
+                         f"{template.dtype}: written by another development version of "
+                         "drumheat; start anew without --resume")
+    values = values.astype(template.dtype, copy=False)  # e.g. float64 -> float32
     if template.shape == values.shape:
         return template.at[...].set(values)
     return jax.numpy.asarray(values)

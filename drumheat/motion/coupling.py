@@ -39,12 +39,14 @@ __all__ = ["CoupledHeat", "PairTimes", "ContactCount", "FrictionBook", "thermal_
 
 
 class PairTimes(NamedTuple):
-    """Contact time of each neighbour pair (M,) s, aligned with ``nbrs.idx``: ``time`` since
-    the last thermal step (while ``k = 0`` still that of the last thermal step, which the next
-    step overwrites); ``rec_time`` from the start of the recording interval to the last
-    thermal step (:func:`recorded_times` adds ``time``; negative: the recording started
-    after the last thermal step, :func:`reset_record`); None in a run that records no
-    contacts (:func:`initial_extra` with ``record=False``)."""
+    """Contact time of each neighbour pair (M,) int32, in DEM steps (``CoupledHeat.dt``
+    each), aligned with ``nbrs.idx``: ``time`` since the last thermal step (while ``k = 0``
+    still that of the last thermal step, which the next step overwrites); ``rec_time`` from
+    the start of the recording interval to the last thermal step (:func:`recorded_times` adds
+    ``time`` and gives seconds; negative: the recording started after the last thermal step,
+    :func:`reset_record`); None in a run that records no contacts (:func:`initial_extra` with
+    ``record=False``). Whole steps: a count is exact and takes half the memory of a float64
+    time."""
 
     time: jax.Array
     rec_time: Optional[jax.Array]
@@ -52,8 +54,9 @@ class PairTimes(NamedTuple):
 
 class ContactCount(NamedTuple):
     """Contact time of all particle pairs (``pair``) and of all particle-heated-wall contacts
-    (``wall``) from :func:`reset_count` to the last thermal step, s (:func:`contact_count`
-    adds the time since; negative: the count started after the last thermal step)."""
+    (``wall``) from :func:`reset_count` to the last thermal step, in DEM steps (float64
+    scalars, whole numbers; :func:`contact_count` adds the time since and gives seconds;
+    negative: the count started after the last thermal step)."""
 
     pair: jax.Array
     wall: jax.Array
@@ -77,11 +80,12 @@ class CoupledHeat(PairCarried):
 
     T: (N,) K. Q: {account: J} heat received since t = 0. model: the thermal model's array
     leaves (``eqx.partition(m, eqx.is_array)[0]``). k: steps since the last thermal step.
-    wall_time, rec_wall_time: (N * n_walls,) s, contact time per particle-wall slot since the
-    last thermal step and from the start of the recording interval to the last thermal step
-    (as ``time`` and ``rec_time`` of :class:`PairTimes`; ``rec_wall_time`` None, as
-    ``rec_time``, in a run that records no contacts). pair: :class:`PairTimes`. count:
-    :class:`ContactCount`. Optional (None when the run has none): Q_walls (n_walls,) J, the
+    wall_time, rec_wall_time: (N * n_walls,) int32, contact time per particle-wall slot in DEM
+    steps since the last thermal step and from the start of the recording interval to the
+    last thermal step (as ``time`` and ``rec_time`` of :class:`PairTimes`; ``rec_wall_time``
+    None, as ``rec_time``, in a run that records no contacts). pair: :class:`PairTimes`.
+    count: :class:`ContactCount`. dt: the DEM step the counts count, s (static).
+    Optional (None when the run has none): Q_walls (n_walls,) J, the
     heat each wall primitive gave (``per_wall``); wall: the drum wall's segments
     (``[heat.drum_wall]``, :meth:`drumheat.thermal.drum_wall.DrumWall.initial`); friction: a
     :class:`FrictionBook`; flow: the motion model's own accumulators (``moving_bed``).
@@ -95,6 +99,7 @@ class CoupledHeat(PairCarried):
     rec_wall_time: Optional[jax.Array]
     pair: PairTimes
     count: ContactCount
+    dt: float = eqx.field(static=True)
     Q_walls: Optional[jax.Array] = None
     wall: Optional[dict] = None
     friction: Optional[FrictionBook] = None
@@ -112,7 +117,7 @@ class CoupledHeat(PairCarried):
         reads the same before and after)."""
         pair, count, k = arrays
         new = PairTimes(*(None if a is None else remap(a) for a in pair))
-        dropped = jnp.where(k > 0, jnp.sum(pair.time) - jnp.sum(new.time), 0.0)
+        dropped = jnp.where(k > 0, _steps(pair.time) - _steps(new.time), 0.0)
         return new, count._replace(pair=count.pair + dropped), k
 
     def with_pair_arrays(self, arrays) -> "CoupledHeat":
@@ -203,8 +208,8 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
 
     def thermal_step(extra, ops):
         idx = ops[0] if drum_wall else ops
-        net = thermal_network(idx, n, extra.pair.time, extra.wall_time, heated, n_walls, h,
-                              wall_ids)
+        net = thermal_network(idx, n, extra.pair.time * dt, extra.wall_time * dt, heated,
+                              n_walls, h, wall_ids)
         m = model_of(extra)
         if drum_wall:
             q, ext, out = drum_wall_step(m, extra, net, ops[1], ops[2], h, n_walls)
@@ -235,16 +240,17 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
         # ([heat.contact] / [heat.wall] gap_tolerance, drumheat.mechanics.make_dem)
         # (the recording's and the output interval's accumulators take them at the thermal
         # step: a per-step sum over the pairs cost ~0.1 ms per step at N = 1e4 on XLA:CPU)
-        pm = contacts.pair_conducts.astype(jnp.float64) * dt
-        wm = contacts.wall_conducts.astype(jnp.float64) * dt
+        # one step each (PairTimes: whole steps)
+        pm = contacts.pair_conducts.astype(jnp.int32)
+        wm = contacts.wall_conducts.astype(jnp.int32)
         fresh = extra.k == 0  # the first step after a thermal step
-        pair = extra.pair._replace(time=jnp.where(fresh, 0.0, extra.pair.time) + pm)
+        pair = extra.pair._replace(time=jnp.where(fresh, 0, extra.pair.time) + pm)
         fr = extra.friction
         if friction:
             d = contacts.dissipation
             fr = fr._replace(E=fr.E + d.particle, E_walls=fr.E_walls + d.walls,
                              E_sources=fr.E_sources + d.by_source)
-        extra = extra.replace(pair=pair, wall_time=jnp.where(fresh, 0.0, extra.wall_time) + wm,
+        extra = extra.replace(pair=pair, wall_time=jnp.where(fresh, 0, extra.wall_time) + wm,
                               k=extra.k + 1, friction=fr)
         ops = (state.nbrs.idx, state.position, state.time) if drum_wall else state.nbrs.idx
         if substeps == 1:
@@ -275,22 +281,24 @@ def drum_wall_step(m: ThermalModel, extra: CoupledHeat, net: ContactNetwork, pos
     return q, ext, {"wall": wall}
 
 
-def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
+def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int, dt: float,
                   per_wall: bool = False, accounts=(), friction: bool = False,
                   record: bool = True) -> CoupledHeat:
-    """The thermal part of the DEM state at t = 0.
+    """The thermal part of the DEM state at t = 0, for a DEM of step ``dt`` (s; the contact
+    times count its steps).
 
     ``per_wall`` adds the per-primitive heat ``Q_walls`` (n_walls,) J; ``accounts`` adds
     further heat accounts (J, zero at t = 0) that an open boundary books into ``Q`` (e.g. the
     enthalpy carried in by recycled particles); ``friction`` the account ``friction`` and the
     friction-heat accumulators (:func:`make_thermal_update`). ``record=False``: the run
     records no contacts, so the recording's accumulators (:func:`recorded_times`) are left
-    out (None): one float64 per pair slot and per particle-wall slot less in the state, in
+    out (None): one int32 per pair slot and per particle-wall slot less in the state, in
     every neighbour rebuild's remap and in every thermal step.
     """
     if friction:
         accounts = tuple(accounts) + ("friction",)
-    z = jnp.zeros(n * n_walls)
+    z = jnp.zeros(n * n_walls, jnp.int32)
+    zc = jnp.zeros(capacity, jnp.int32)
     zero = jnp.zeros(())
     book = None
     if friction:
@@ -301,8 +309,8 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int,
         Q={a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)},
         model=eqx.partition(model, eqx.is_array)[0], k=jnp.asarray(0, jnp.int32), wall_time=z,
         rec_wall_time=z if record else None,
-        pair=PairTimes(jnp.zeros(capacity), jnp.zeros(capacity) if record else None),
-        count=ContactCount(zero, zero), Q_walls=jnp.zeros(n_walls) if per_wall else None,
+        pair=PairTimes(zc, zc if record else None),
+        count=ContactCount(zero, zero), dt=float(dt), Q_walls=jnp.zeros(n_walls) if per_wall else None,
         # [heat.drum_wall]: the segments' temperatures and accounts
         wall=model.drum_wall.initial() if model.drum_wall is not None else None,
         friction=book)
@@ -313,20 +321,27 @@ def _slot_heated(wall_heated, n):
     return jnp.tile(jnp.asarray(wall_heated, bool), n).astype(jnp.float64)
 
 
+def _steps(counts):
+    """The sum of step counts as a float64 scalar (exact below 2^53 steps)."""
+    return jnp.sum(counts, dtype=jnp.float64)
+
+
 def _since_thermal_step(extra):
-    """``(pair (M,), wall (N * n_walls,))``: the contact times since the last thermal step."""
+    """``(pair (M,), wall (N * n_walls,))``: the contact times since the last thermal step,
+    in steps."""
     fresh = extra.k == 0
-    return (jnp.where(fresh, 0.0, extra.pair.time), jnp.where(fresh, 0.0, extra.wall_time))
+    return (jnp.where(fresh, 0, extra.pair.time), jnp.where(fresh, 0, extra.wall_time))
 
 
 def _pending(extra, slot_heated) -> ContactCount:
-    """The contact times since the last thermal step, summed as :class:`ContactCount`."""
+    """The contact times since the last thermal step, summed as :class:`ContactCount`
+    (steps)."""
     pair, wall = _since_thermal_step(extra)
-    return ContactCount(jnp.sum(pair), jnp.sum(wall * slot_heated))
+    return ContactCount(_steps(pair), jnp.sum(wall * slot_heated))
 
 
 def _count(extra, slot_heated) -> ContactCount:
-    """The count with the contact times since the last thermal step added."""
+    """The count with the contact times since the last thermal step added (steps)."""
     return ContactCount(*(c + p for c, p in zip(extra.count, _pending(extra, slot_heated))))
 
 
@@ -338,13 +353,14 @@ def recorded_times(extra):
         raise ValueError("this coupled-heat state records no contact times (initial_extra "
                          "with record=False)")
     pair, wall = _since_thermal_step(extra)
-    return extra.pair.rec_time + pair, extra.rec_wall_time + wall
+    return (extra.pair.rec_time + pair) * extra.dt, (extra.rec_wall_time + wall) * extra.dt
 
 
 def contact_count(extra, wall_heated) -> ContactCount:
     """The contact time of all particle pairs and of all particle-heated-wall contacts since
     :func:`reset_count`, s (``wall_heated`` (n_walls,) as for :func:`make_thermal_update`)."""
-    return _count(extra, _slot_heated(wall_heated, extra.T.shape[-1]))
+    return ContactCount(*(c * extra.dt for c in
+                          _count(extra, _slot_heated(wall_heated, extra.T.shape[-1]))))
 
 
 def reset_record(extra):

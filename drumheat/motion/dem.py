@@ -310,7 +310,8 @@ class DEMBed(DEMMotion):
         state = self.dem.init(self.packing_positions())
         cap = state.nbrs.idx.shape[1]
         return state._replace(extra=initial_extra(
-            model, T0, cap, self.n, len(self.walls), friction=self.scene.heat.friction is not None,
+            model, T0, cap, self.n, len(self.walls), self.dt,
+            friction=self.scene.heat.friction is not None,
             record=self.steps_per_record is not None))
 
     def _steps(self, t0, t1, unit) -> int:

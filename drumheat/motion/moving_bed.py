@@ -305,7 +305,7 @@ class MovingBed(DEMMotion):
         model, T0 = self.model(params)
         state = self.dem.init(self.packing_positions())
         cap = state.nbrs.idx.shape[1]
-        extra = initial_extra(model, T0, cap, self.n, self.n_walls, per_wall=True,
+        extra = initial_extra(model, T0, cap, self.n, self.n_walls, self.dt, per_wall=True,
                               accounts=("inflow",), record=False)  # records no contacts
         return state._replace(extra=extra.replace(flow=self.initial_flow()))
 
