@@ -64,7 +64,7 @@ def timed(fn, *args, repeat=3):
 
 def loops(dem):
     """Jitted ``(steps without rebuild, contact calls, rebuild)`` functions of ``dem``."""
-    step, forces, nb, n = dem.step_fn, dem._forces.__wrapped__, dem.neighbor, dem.particles.n
+    step, forces, nb, n = dem.step_fn, dem._forces.__wrapped__.func, dem.neighbor, dem.particles.n
 
     @jax.jit
     def keep_loop(state, k):

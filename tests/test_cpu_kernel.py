@@ -28,7 +28,7 @@ R_P = 0.002  # particle radius (m)
 
 def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling=True,
          rotation=True, calm=False, friction_heat=None, shuffle=False, layers=4,
-         position_dtype=None):
+         position_dtype=None, contact_details=True):
     """A small moving bed of two materials with rolling resistance in the lower half of an
     annulus between a rotating drum shell and a counter-rotating inner cylinder (2D, or a 3D
     slice with periodic z): spheres of 0.97-1 r on a 1.97 r lattice, jittered, so that many
@@ -41,7 +41,7 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     function of the particles that gives one). ``shuffle``: the particles numbered at random
     (else along the lattice, so that neighbours lie near each other in the numbering).
     ``layers``: lattice layers along the periodic z (3D); ``position_dtype``: make_dem's (the
-    state's positions in it)."""
+    state's positions in it); ``contact_details``: make_dem's."""
     rng = np.random.default_rng(seed)
     R, r_in = 0.03, 0.008
     a = (2.0 if calm else 1.97) * R_P
@@ -87,7 +87,7 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     # by e every two steps, the same in either kernel); a thin skin for frequent rebuilds
     kw = dict(dim=dim, dt=2e-6 if calm else 1e-5, skin=0.00005 if calm else 0.0008,
               dtype=dtype, position_dtype=position_dtype, pair_kernel=kernel,
-              conduction=cond, rotation=rotation,
+              conduction=cond, rotation=rotation, contact_details=contact_details,
               friction_heat=friction_heat(part) if callable(friction_heat) else friction_heat)
     if dim == 3:
         kw["periodic_length"] = layers * a
@@ -117,6 +117,46 @@ def _forces(dem, st):
     """Force, torque, pair springs, wall springs, Contacts, max overlap, heat flows."""
     return dem._forces(st.position, st.velocity, st.angular_velocity, st.time, st.nbrs,
                        st.pair_spring, st.wall_spring, temperature=st.extra)
+
+
+@pytest.mark.parametrize("kernel", ["jax", pytest.param("cpu", marks=needs_kernel)])
+def test_steps_without_contact_details(kernel):
+    """make_dem(contact_details=False): the step's contacts leave out the per-pair mask,
+    overlap, distance and normal force (None; the C++ loop does not write them) and the steps
+    are the same, the pairs that conduct included (3D, float64, conduction gap, friction
+    heat): bit for bit with the C++ loop, to round-off with the JAX kernel (XLA fuses the
+    program without the unused arrays otherwise); DEM.contacts still has them."""
+    from drumheat.mechanics.dissipation import FrictionHeat
+
+    st = _bed(3, jnp.float64, "jax", "projected", 0.05)[1]
+    dems = [_bed(3, jnp.float64, kernel, "projected", 0.05, contact_details=d,
+                 friction_heat=FrictionHeat())[0] for d in (True, False)]
+    out = []
+    for dem in dems:
+        s, c = st, None
+        for _ in range(3):
+            s, c = dem.step(s)
+        out.append((s, c))
+    (a, ca), (b, cb) = out
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        if kernel == "cpu" or not jnp.issubdtype(x.dtype, jnp.floating):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        else:  # to round-off of the largest entry (sums over contacts)
+            scale = float(jnp.max(jnp.abs(x), initial=0.0))
+            np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=0,
+                                       atol=REL[jnp.float64] * scale)
+    for f in ("pair_mask", "pair_overlap", "pair_distance", "pair_normal_force"):
+        assert getattr(cb, f) is None and getattr(ca, f) is not None, f
+    assert int(jnp.sum(ca.pair_conducts)) >= int(jnp.sum(ca.pair_mask)) > 10
+    for f in ("pair_conducts", "wall_conducts", "wall_mask", "wall_overlap"):
+        np.testing.assert_array_equal(np.asarray(getattr(ca, f)), np.asarray(getattr(cb, f)), f)
+    np.testing.assert_allclose(np.asarray(ca.dissipation.particle),
+                               np.asarray(cb.dissipation.particle), rtol=1e-12,
+                               atol=1e-12 * float(jnp.max(jnp.abs(ca.dissipation.particle))))
+    full = dems[1].contacts(b)
+    np.testing.assert_allclose(np.asarray(full.pair_overlap),
+                               np.asarray(dems[0].contacts(a).pair_overlap), rtol=1e-12,
+                               atol=1e-12 * R_P)
 
 
 def _close(x, y, rel, what):

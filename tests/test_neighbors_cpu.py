@@ -178,7 +178,7 @@ def test_kernel_conduction_mask_is_pair_gap_mask():
     """The C++ loop's pairs within the conduction gap are pair_gap_mask's, pair for pair."""
     dem, st = _drum("cpu", jnp.float64, gap=0.05)
     st = dem.run(st, 200, chunk=200)
-    forces = dem._forces.__wrapped__
+    forces = dem._forces.__wrapped__.func  # the ContactForces
     r = dem._forces(st.position, st.velocity, st.angular_velocity, st.time, st.nbrs,
                     st.pair_spring, st.wall_spring)
     ref = jax.jit(forces.pair_gap_mask)(st.position, st.nbrs.idx[0], st.nbrs.idx[1])

@@ -127,6 +127,40 @@ def test_contact_flow_is_antisymmetric_and_sparse():
     assert set(ext) == {"gas"}
 
 
+def test_pair_sum_in_blocks_counts_every_slot_once(monkeypatch):
+    # ContactNetwork.pair_sum takes many slots in blocks (the last one shifted back to end at
+    # the last slot): every slot counts once, as in one pass, to round-off; unused slots
+    # (index N, weight 0) add nothing
+    import jax.numpy as jnp
+
+    from drumheat.thermal import network
+    from drumheat.thermal.network import ContactNetwork
+
+    rng = np.random.default_rng(4)
+    n, m = 40, 203
+    i = rng.integers(0, n, m)
+    j = rng.integers(0, n, m)
+    w = rng.uniform(0.0, 1.0, m)
+    i[-15:], j[-15:], w[-15:] = n, n, 0.0  # padding
+    T = rng.uniform(290.0, 310.0, n)
+    net = ContactNetwork(jnp.asarray(i), jnp.asarray(j), jnp.asarray(w), jnp.zeros(0, int),
+                         jnp.zeros(0, int), jnp.zeros(0))
+    flow = lambda a, b, wt: 2.5 * wt * (jnp.asarray(T)[b] - jnp.asarray(T)[a])  # noqa: E731
+    ref_q, ref_g = np.zeros(n + 1), np.zeros(n + 1)
+    q = 2.5 * w * (T[np.minimum(j, n - 1)] - T[np.minimum(i, n - 1)])
+    np.add.at(ref_q, i, q)
+    np.add.at(ref_q, j, -q)
+    np.add.at(ref_g, i, 2.5 * w)
+    np.add.at(ref_g, j, 2.5 * w)
+    for block in (1 << 16, 16):  # one pass; 8 blocks of 26 slots, the last one shifted
+        monkeypatch.setattr(network, "PAIR_BLOCK", block)
+        got = net.pair_sum(flow, jnp.zeros(n))
+        np.testing.assert_allclose(got, ref_q[:n], rtol=0, atol=1e-12 * np.abs(q).max())
+        g = net.pair_sum(lambda a, b, wt: 2.5 * wt, jnp.zeros(n), sign=1.0)
+        np.testing.assert_allclose(g, ref_g[:n], rtol=1e-14)
+    assert abs(float(jnp.sum(got))) < 1e-12 * np.abs(q).max()
+
+
 def test_wall_heated_bed_energy_balance_and_alpha():
     res = dh.run(load_scene("weigler-glass-wall", {"run.duration": 3000.0}), progress=False)
     ts = res.timeseries

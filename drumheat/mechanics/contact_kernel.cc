@@ -38,7 +38,8 @@
 // (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling), fh
 // (1: friction heat), cgap (the gap tolerance of output 11).
 // Outputs: 0 forces (N, D), 1 torques (N, 3) or (N); 2 new pair springs (M, D); 3 overlap,
-// 4 centre distance, 5 normal force per pair (M); 6 new wall springs (N, W, D); 7 overlap and
+// 4 centre distance, 5 normal force per pair (M, or all three of length 0: not written, for a
+// caller that reads none of them); 6 new wall springs (N, W, D); 7 overlap and
 // 8 normal force per wall slot (N, W) (all zero where nothing touches); 9 the largest
 // overlap / radius (smaller radius of a pair) (1); 10 heat flow into each particle (N or 0) f64;
 // 11 whether each pair conducts (M) pred: it overlaps, or its surface gap |d| - r_i - r_j is at
@@ -623,7 +624,7 @@ struct Loop {
   // cell order: run() gathers the particles' data into that order, and the forces, torques and
   // heat are summed there); pt and every per-slot array stay in the particles' own numbering
   const int32_t* RK = nullptr;
-  S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;
+  S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;  // OV, DI, FN null: not wanted
   bool* CD;
   const double* TK;
   bool heat_on, gap_on, rot, fh, one_type, roll_pp = false, roll_pw = false;
@@ -676,7 +677,8 @@ struct Loop {
   void padding(int64_t p0, int64_t p1) const {
     for (int64_t k = p0; k < p1; ++k) {
       if (fh) for (int c = 0; c < KP; ++c) PW[KP*k + c] = S(0);
-      OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); CD[k] = false;
+      if (OV) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
+      CD[k] = false;
       clear<S, D>(Sn + D*k);
     }
   }
@@ -715,7 +717,7 @@ struct Loop {
       // zero where nothing touches (written here, while the lines are at hand: a sweep over
       // the whole output first would pass them through the cache twice where they do not fit),
       // and which pairs conduct, for every slot
-      for (int64_t k = b0; k < b1; ++k) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
+      if (OV) for (int64_t k = b0; k < b1; ++k) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
       for (int64_t k = b0; k < b1; ++k) CD[k] = bl->cd[k - b0];
       if (fh) for (int64_t k = KP*b0; k < KP*b1; ++k) PW[k] = S(0);
       int64_t cnt = 0;
@@ -784,7 +786,7 @@ struct Loop {
         }
         continue;
       }
-      FN[k] = t.fn[q];
+      if (OV) FN[k] = t.fn[q];
       if (fh) { R[0] += double(t.loss[0][q]); R[1] += double(t.loss[1][q]); }
       for (int c = 0; c < D; ++c) { F[D*j + c] += t.f[c][q]; F[D*i + c] -= t.f[c][q]; }
       if (rot) {
@@ -803,7 +805,7 @@ struct Loop {
         for (int c = 0; c < DW; ++c) hw[3*D + c] = roll_pp ? t.M[c][q] : S(0);
         hw[KP - 1] = t.du[q];
       }
-      OV[k] = ov; DI[k] = dist;
+      if (OV) { OV[k] = ov; DI[k] = dist; }
       if (heat_on) {
         const double qh = conductance(a.law, a.h, ri, rj, dist) * (TK[j] - TK[i]);
         Q[i] += qh; Q[j] -= qh;
@@ -1165,8 +1167,13 @@ static ffi::Error ContactsImpl(
   a.pt = ptype.typed_data(); a.P = pairs.typed_data(); a.temp = temp.typed_data();
   a.order = order.element_count() ? order.typed_data() : nullptr;
   a.F = force->untyped_data(); a.T = torque->untyped_data(); a.S = nspring->untyped_data();
-  a.OV = ovl_out->untyped_data(); a.DI = dist_out->untyped_data();
-  a.FN = fn_out->untyped_data(); a.WS = nwspring->untyped_data();
+  // the per-pair overlaps, distances and normal forces: all three of length M, or all three
+  // of length 0 (not written)
+  const bool details = ovl_out->element_count() != 0;
+  a.OV = details ? ovl_out->untyped_data() : nullptr;
+  a.DI = details ? dist_out->untyped_data() : nullptr;
+  a.FN = details ? fn_out->untyped_data() : nullptr;
+  a.WS = nwspring->untyped_data();
   a.WO = wovl_out->untyped_data(); a.WF = wfn_out->untyped_data();
   a.MX = max_ratio->untyped_data(); a.Q = heat->typed_data(); a.CD = conducts->typed_data();
   a.PW = pair_rows->untyped_data(); a.WW = wall_rows->untyped_data(); a.R = rates->typed_data();
@@ -1181,6 +1188,10 @@ static ffi::Error ContactsImpl(
                static_cast<int64_t>(wall_rows->element_count()) != a.n * a.nw * (2*dim + dw + 1) ||
                static_cast<int64_t>(wdist0.element_count()) != a.n * a.nw))
     return ffi::Error::InvalidArgument("drumheat_contacts: friction heat rows of wrong size");
+  for (ffi::Result<ffi::AnyBuffer>* b : {&ovl_out, &dist_out, &fn_out})
+    if (static_cast<int64_t>((*b)->element_count()) != (details ? a.m : 0))
+      return ffi::Error::InvalidArgument("drumheat_contacts: the per-pair overlap, distance and "
+                                         "normal force must all have length M or all length 0");
   if (a.order && static_cast<int64_t>(order.element_count()) != a.n)
     return ffi::Error::InvalidArgument("drumheat_contacts: the cell order must have length N or 0");
   const bool f64 = et == ffi::DataType::F64;

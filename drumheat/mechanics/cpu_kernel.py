@@ -286,7 +286,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
              wall_normal, wall_velocity, wall_spring, *, tables_pp, tables_pw, wall_omega, dt,
              periodic_length=None, rotation=True, temperature=None, conduction_law=None,
              conduction_h=0.0, gap_tolerance=0.0, wall_distance_before=None,
-             pair_gap=0.0, order=None):
+             pair_gap=0.0, order=None, details=True):
     """Particle-particle and particle-wall contact forces in one C++ loop.
 
     The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
@@ -319,12 +319,14 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         other in memory however the particles are numbered, sums at the ranks and puts the sums
         back. Each sum takes its terms in the list's order, as without ``order``; its threads
         take ranges of ranks instead of indices (round-off, as another thread count).
+      details: False: the per-pair overlap, centre distance and normal force are not written
+        (returned with length 0).
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
     wall_overlap, wall_normal_force, max_overlap, heat, conducts, pair_rows, wall_rows,
     rates)``: contact forces (N, D) and torques (N, 3) or (N,) on the particles (torques zero
     without ``rotation``); per pair the new springs (M, D), overlap, centre distance and normal
-    force (M); per wall slot the new springs (N, W, D), overlap and normal force (N, W); all
+    force (M, or length 0 without ``details``); per wall slot the new springs (N, W, D), overlap and normal force (N, W); all
     zero where nothing touches; the largest overlap / radius (the smaller radius of a pair)
     (1,); the heat flow into each particle (N,) float64, W (length 0 without a conduction law);
     whether each pair conducts (M,) bool: it overlaps or its surface gap is at most
@@ -343,8 +345,9 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
     nw = wall_distance.shape[1]
     sd = jax.ShapeDtypeStruct
     wshape = (n, 3) if dim == 3 else (n,)
-    outs = [sd((n, dim), dtype), sd(wshape, dtype), sd((m, dim), dtype), sd((m,), dtype),
-            sd((m,), dtype), sd((m,), dtype), sd((n, nw, dim), dtype), sd((n, nw), dtype),
+    md = m if details else 0
+    outs = [sd((n, dim), dtype), sd(wshape, dtype), sd((m, dim), dtype), sd((md,), dtype),
+            sd((md,), dtype), sd((md,), dtype), sd((n, nw, dim), dtype), sd((n, nw), dtype),
             sd((n, nw), dtype), sd((1,), dtype)]
     if conduction_law is None:
         law, temperature = -1, jnp.zeros((0,), jnp.float64)

@@ -59,6 +59,10 @@ class Contacts(NamedTuple):
     (:class:`~drumheat.mechanics.dissipation.Dissipation`), with ``make_dem(friction_heat=...)``;
     None otherwise.
     Always multiply by the masks: padded entries hold index N (pairs) and zeros.
+    ``pair_mask``, ``pair_overlap``, ``pair_distance`` and ``pair_normal_force`` are None in
+    the contacts a step hands to ``extra_update`` when the DEM was built with
+    ``make_dem(contact_details=False)`` (a hook that reads only ``pair_conducts``, as the coupled
+    heat does; :meth:`DEM.contacts <drumheat.mechanics.DEM.contacts>` always has them).
     """
 
     pair_i: jax.Array
@@ -181,7 +185,8 @@ class ContactForces:
     def __init__(self, particles, walls, params: ContactParams, *, dim: int, dt: float, dtype,
                  gravity, displacement, rotation: bool, conduction: PairConduction | None,
                  conduction_gap: tuple[float, float], periodic_length=None,
-                 friction_heat: FrictionHeat | None = None, fold_length=None):
+                 friction_heat: FrictionHeat | None = None, fold_length=None,
+                 pair_details: bool = True):
         self.n, self.dim, self.walls, self.n_w = particles.n, dim, tuple(walls), len(walls)
         self.params, self.dtype, self.rotation = params, dtype, rotation
         # mixed precision (positions wider than the mechanics): the pair law reads positions
@@ -204,17 +209,29 @@ class ContactForces:
         self.gap_pp, self.gap_pw = conduction_gap
         self.periodic_length = periodic_length
         self.friction_heat = friction_heat
+        # whether a call's Contacts carry the per-pair mask, overlap, distance and normal force
+        # (unless the call says otherwise)
+        self.pair_details = pair_details
 
     # -- the one signature ---------------------------------------------------------------------
     def __call__(self, pos, vel, w, t, nbrs, pair_spring, wall_spring,
-                 temperature=None) -> ForceResult:
+                 temperature=None, details: bool | None = None) -> ForceResult:
         """Forces and torques at ``pos`` with the velocities ``vel``, ``w`` (the half-step ones
         in the Verlet step: the dashpots and the spring increment use them, as LIGGGHTS does).
-        ``temperature`` (N,) K: for the per-step pair conduction, if the system has one."""
+        ``temperature`` (N,) K: for the per-step pair conduction, if the system has one.
+        ``details``: whether the :class:`Contacts` carry the per-pair mask, overlap, distance
+        and normal force (else None; the C++ loop then does not write them); default
+        ``pair_details`` of the constructor."""
         force = self.mass[:, None] * self.g_vec
         torque = jnp.zeros_like(w)
-        return self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                              temperature)
+        res = self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
+                             temperature, self.pair_details if details is None else details)
+        return res
+
+    @staticmethod
+    def _without_details(contacts: Contacts) -> Contacts:
+        return contacts._replace(pair_mask=None, pair_overlap=None, pair_distance=None,
+                                 pair_normal_force=None)
 
     def pair_positions(self, pos):
         """The positions the pair law reads: ``pos`` itself where it is in the mechanics'
@@ -233,10 +250,10 @@ class ContactForces:
         """The forces at a :class:`~drumheat.mechanics.DEMState` with its own velocities
         (a state's contacts, its energy book, the forces of a fresh state)."""
         return self(state.position, state.velocity, state.angular_velocity, state.time,
-                    state.nbrs, state.pair_spring, state.wall_spring)
+                    state.nbrs, state.pair_spring, state.wall_spring, details=True)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature) -> ForceResult:  # pragma: no cover - abstract
+                  temperature, details) -> ForceResult:  # pragma: no cover - abstract
         raise NotImplementedError
 
     def dissipation(self, work, vel, w) -> Dissipation:  # pragma: no cover - abstract
@@ -336,7 +353,7 @@ class JaxContactForces(ContactForces):
     one scatter of forces and torques), walls as an (N, W) block."""
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature) -> ForceResult:
+                  temperature, details) -> ForceResult:
         n, gap_pp, radius = self.n, self.gap_pp, self.radius
         i, j = nbrs.idx[0], nbrs.idx[1]
         force, torque, new_spring, ovl, dist, fn, active, max_ovl, pair_work = self._pairs(
@@ -364,6 +381,8 @@ class JaxContactForces(ContactForces):
         if c is not None and temperature is not None:
             heat = pair_heat_flow(temperature, contacts, self.radius_thermal, c.law,
                                   c.coefficient, c.gap_tolerance, pair_dist)
+        if not details:
+            contacts = self._without_details(contacts)
         return ForceResult(force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat,
                            work)
 
@@ -524,7 +543,7 @@ class CpuContactForces(ContactForces):
             self.fold_length or self.periodic_length, self.rotation)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature) -> ForceResult:
+                  temperature, details) -> ForceResult:
         i, j = nbrs.idx[0], nbrs.idx[1]
         wd, wn, wv = self.wall_geometry(pos, t)
         heat_args = {}
@@ -539,8 +558,8 @@ class CpuContactForces(ContactForces):
          pair_rows, wall_rows, rates) = self._kernel.contacts(
             self.pair_positions(pos), vel, w, self.radius, self.mass, self.inertia, self.ptype,
             nbrs.idx, pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
-            pair_gap=self.gap_pp, order=nbrs.order)
-        active = ovl > 0
+            pair_gap=self.gap_pp, order=nbrs.order, details=details)
+        active = ovl > 0 if details else None
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
         # p_cond: the pairs within the conduction gap, pair_gap_mask's test in the C++ loop
         contacts = Contacts(
@@ -548,6 +567,8 @@ class CpuContactForces(ContactForces):
             pair_normal_force=fn, wall_particle=w_part, wall_index=w_idx, wall_id=w_id,
             wall_mask=w_mask, wall_overlap=w_ovl, wall_normal_force=w_fn, pair_conducts=p_cond,
             wall_conducts=self.wall_gap_mask(wd, w_mask))
+        if not details:
+            contacts = self._without_details(contacts)
         if c is None or temperature is None:
             heat = None
         work = None

@@ -823,6 +823,7 @@ def make_dem(
     conduction: Optional[PairConduction] = None,
     conduction_gap: tuple[float, float] = (0.0, 0.0),
     friction_heat: Optional[FrictionHeat] = None,
+    contact_details: bool = True,
 ) -> DEM:
     """Compose a DEM system (static choices are fixed here, before ``jit``).
 
@@ -899,6 +900,11 @@ def make_dem(
         contact; the step's ``Contacts.dissipation`` carries it to ``extra_update``
         (:mod:`drumheat.mechanics.dissipation`). Both kernels (the C++ loop in a second pass
         after the second half-kick, :func:`~drumheat.mechanics.cpu_kernel.contact_heat`).
+      contact_details: False: the contacts a step hands to ``extra_update`` leave out the
+        per-pair mask, overlap, centre distance and normal force (None; the C++ loop does not
+        write them): three arrays per pair slot less in every step's working memory, for a
+        hook that reads only ``pair_conducts`` (the coupled heat). :meth:`DEM.contacts` and
+        :meth:`DEM.energies` have them in any case.
     """
     gap_pp, gap_pw = (float(g) for g in conduction_gap)
     if not (0.0 <= gap_pp < 0.5 and 0.0 <= gap_pw < 0.5):
@@ -957,7 +963,7 @@ def make_dem(
         dtype=dtype, gravity=gravity, rotation=rotation,
         displacement=neighbor.displacement if fold is None else make_displacement(dim, fold),
         conduction=conduction, conduction_gap=(gap_pp, gap_pw), periodic_length=periodic_length,
-        friction_heat=friction_heat, fold_length=fold)
+        friction_heat=friction_heat, fold_length=fold, pair_details=bool(contact_details))
     step, run_steps, energies = _velocity_verlet(
         forces, neighbor, dt=dt, skin=skin, periodic_length=periodic_length, rotation=rotation,
         always_rebuild=always_rebuild, batch_axis=batch_axis, external_force=external_force,
@@ -967,7 +973,7 @@ def make_dem(
         dt=dt, t_crit=t_crit, m_min=m_min, k_max=k_max, dim=dim, walls=walls,
         particles=particles, params=params, neighbor=neighbor, dtype=dtype, gravity=gravity,
         max_overlap=float(max_overlap), domain_lo=dom_lo, domain_hi=dom_hi,
-        _forces=_jit(forces), _step=_jit(step), _run_steps=_jit(run_steps), _diag=diag,
+        _forces=_jit(partial(forces, details=True)), _step=_jit(step), _run_steps=_jit(run_steps), _diag=diag,
         _energies=_jit(energies), _run_chunk=_jit(run_steps, donate=True),
         default_chunk=int(chunk), conduction=conduction,
         cell_capacity=cell_cap, _external=external_force, step_fn=step, run_steps_fn=run_steps,

@@ -281,7 +281,8 @@ class DEMBed(DEMMotion):
                         chunk=self.steps_per_record or self.steps_per_output,
                         batch_axis=batch_axis, conduction_gap=self.setup.conduction_gap,
                         pair_kernel=self.contact_backend(batch_axis is not None).backend,
-                        friction_heat=friction)
+                        friction_heat=friction,
+                        contact_details=False)  # the coupled heat reads pair_conducts only
 
     def packing_positions(self) -> np.ndarray:
         """Initial positions (pouring, deposition or a file), settled with the drum at rest

@@ -298,7 +298,8 @@ class MovingBed(DEMMotion):
                         position_dtype=self.position_dtype,
                         extra_update=update, boundary_update=self.make_boundary(),
                         chunk=self.steps_per_output, conduction_gap=self.setup.conduction_gap,
-                        pair_kernel=self.contact_backend().backend)
+                        pair_kernel=self.contact_backend().backend,
+                        contact_details=False)  # the coupled heat reads pair_conducts only
 
     # -- the loop -------------------------------------------------------------------------------
     def initial_state(self, params=None):

@@ -48,19 +48,22 @@ class ContactConduction(AbstractEffect):
 
     def conductance(self, particles: ThermalParticles, net: ContactNetwork) -> Array:
         """Conductance of every pair slot, W/K (0 for unused slots)."""
-        return self.alpha * pair_area(particles, net.pair_i, net.pair_j) * net.pair_weight
+        return self._conductance(particles, net.pair_i, net.pair_j, net.pair_weight)
+
+    def _conductance(self, particles: ThermalParticles, i, j, w) -> Array:
+        return self.alpha * pair_area(particles, i, j) * w
 
     def heat_flow(self, T: Array, particles: ThermalParticles, net: ContactNetwork) -> Array:
         """Heat flow into each particle, W, shape (N,)."""
-        q = self.conductance(particles, net) * (T[net.pair_j] - T[net.pair_i])
-        return jnp.zeros_like(T).at[net.pair_i].add(q).at[net.pair_j].add(-q)
+        return net.pair_sum(lambda i, j, w: self._conductance(particles, i, j, w) * (T[j] - T[i]),
+                            jnp.zeros_like(T))
 
     def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork,
                         T: Array | None = None) -> Array:
         """Sum of the conductances at each particle, W/K (for the stability limit [2.2])."""
-        g = self.conductance(particles, net)
         n = particles.diameter.shape[0]
-        return jnp.zeros(n).at[net.pair_i].add(g).at[net.pair_j].add(g)
+        return net.pair_sum(lambda i, j, w: self._conductance(particles, i, j, w),
+                            jnp.zeros(n), sign=1.0)
 
     @classmethod
     def from_table(cls, table: TableValues, ctx: EffectContext) -> "ContactConduction":

@@ -12,9 +12,15 @@ resting bed; between 0 and 1 when the thermal step spans several mechanical step
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+
+#: :meth:`ContactNetwork.pair_sum` takes the pair slots in blocks of at least this many
+PAIR_BLOCK = 1 << 16
+#: ... and in at most this many blocks
+PAIR_BLOCKS_MAX = 8
 
 
 class ContactNetwork(eqx.Module):
@@ -49,6 +55,41 @@ class ContactNetwork(eqx.Module):
     wall_id: Array
     wall_weight: Array
     wall_angle: Array | None = None
+
+    def pair_sum(self, fn, total: Array, sign: float = -1.0) -> Array:
+        """``total`` (N,) plus, for every pair slot, ``q = fn(i, j, w)`` added at its particle
+        ``i`` and ``sign * q`` at its particle ``j`` (``sign = -1``: the heat q flows from j to
+        i; ``+1``: a conductance counts at both ends).
+
+        ``fn`` maps the slots' indices and weights (arrays of one block of slots) to their
+        values, and must give 0 where ``w = 0`` (as every unused slot does). Beyond
+        :data:`PAIR_BLOCK` slots the slots go in up to :data:`PAIR_BLOCKS_MAX` blocks of equal
+        length, one after the other, so that the per-slot temporaries of ``fn`` (the gathers of
+        both partners' temperatures and sizes) exist for one block at a time instead of for
+        every slot at once: in a coupled DEM run they set the peak of XLA's working memory
+        (docs/performance.md, memory). The last block is shifted back to end at the last slot;
+        the slots it shares with the block before it count there only (weight 0 here). The
+        terms of a particle's sum are added block by block, so the sums differ from those of
+        one pass by round-off.
+        """
+        def add(acc, i, j, w):
+            q = fn(i, j, w)
+            return acc.at[i].add(q).at[j].add(sign * q)
+
+        m = self.pair_i.shape[0]
+        blocks = min(PAIR_BLOCKS_MAX, -(-m // PAIR_BLOCK))
+        if blocks <= 1:
+            return add(total, self.pair_i, self.pair_j, self.pair_weight)
+        size = -(-m // blocks)
+
+        def block(b, acc):
+            start = jnp.minimum(b * size, m - size)
+            cut = lambda a: jax.lax.dynamic_slice_in_dim(a, start, size)  # noqa: E731
+            own = start + jnp.arange(size) >= b * size
+            w = jnp.where(own, cut(self.pair_weight), 0.0)
+            return add(acc, cut(self.pair_i), cut(self.pair_j), w)
+
+        return jax.lax.fori_loop(0, blocks, block, total)
 
     @property
     def n_pairs(self) -> Array:
