@@ -261,17 +261,23 @@ def test_checkpoint_of_another_scene_is_refused(tmp_path, monkeypatch):
                progress=False, resume=True)
 
 
-def test_checkpoint_of_another_state_layout_is_refused(tmp_path, monkeypatch):
-    """A checkpoint stores its state's layout (drumheat.runner.checkpoint.state_structure):
-    leaves of a state laid out otherwise (an earlier development version) are refused instead
-    of landing in the wrong places."""
+def _interrupted_dem_checkpoint(tmp_path, monkeypatch):
+    """``(result folder, checkpoint arrays)`` of the coupled DEM scene killed after its
+    second chunk."""
     out = tmp_path / "run"
     with monkeypatch.context() as m:
         kill_at(m, "dem", 2)
         with pytest.raises(Killed):
             dh.run(dem_scene(), out=out, progress=False)
     with np.load(out / "checkpoint.npz") as f:
-        data = {k: f[k] for k in f.files}
+        return out, {k: f[k] for k in f.files}
+
+
+def test_checkpoint_of_another_state_layout_is_refused(tmp_path, monkeypatch):
+    """A checkpoint stores its state's layout (drumheat.runner.checkpoint.state_structure):
+    leaves of a state laid out otherwise (an earlier development version) are refused instead
+    of landing in the wrong places."""
+    out, data = _interrupted_dem_checkpoint(tmp_path, monkeypatch)
     meta = json.loads(str(data["meta"]))
     assert "CoupledHeat" in meta["state"]["structure"]
     meta["state"]["structure"] = meta["state"]["structure"].replace("CoupledHeat", "dict")
@@ -285,13 +291,7 @@ def test_checkpoint_array_of_another_kind_is_refused(tmp_path, monkeypatch):
     """A state array of another kind (the contact times of the coupled heat were float64
     seconds until 0.2.0.dev3, whole steps in int32 since) is refused instead of being cast
     (seconds read as step counts)."""
-    out = tmp_path / "run"
-    with monkeypatch.context() as m:
-        kill_at(m, "dem", 2)
-        with pytest.raises(Killed):
-            dh.run(dem_scene(), out=out, progress=False)
-    with np.load(out / "checkpoint.npz") as f:
-        data = {k: f[k] for k in f.files}
+    out, data = _interrupted_dem_checkpoint(tmp_path, monkeypatch)
     dyn = eqx.partition(make_motion(dem_scene()).initial_state(), eqx.is_array)[0]
     paths = [jax.tree_util.keystr(p) for p, _ in jax.tree_util.tree_leaves_with_path(dyn)]
     k = paths.index(".extra.pair.time")  # the pairs' contact times since the thermal step

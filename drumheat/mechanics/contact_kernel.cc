@@ -686,10 +686,11 @@ struct Loop {
   // The pair slots [k0, k1) in blocks of BLOCK slots, two passes per block. The scan tells
   // which slots lie within reach and which conduct (within_reach, in vector instructions),
   // writes every slot's outputs as for a pair that does not touch (zeros, the spring cleared,
-  // with friction heat the opened contact's row) and collects the slots within reach in a short list (a slot's index
-  // written and the count advanced by the flag: no branch on the geometry, so the processor does
-  // not mispredict on the many listed pairs out of reach); `tile` then computes the list, Tile::N
-  // slots at a time, while its slots are still in the cache.
+  // with friction heat the opened contact's row) and collects the slots within reach in a
+  // short list (a slot's index written and the count advanced by the flag: no branch on the
+  // geometry, so the processor does not mispredict on the many listed pairs out of reach);
+  // `tile` then computes the list, Tile::N slots at a time, while its slots are still in the
+  // cache.
   static constexpr int64_t BLOCK = Block<S, D>::N;
 
   S pairs(int64_t k0, int64_t k1, S* F, S* T, double* Q, double* R) const {

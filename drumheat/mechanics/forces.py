@@ -224,9 +224,8 @@ class ContactForces:
         ``pair_details`` of the constructor."""
         force = self.mass[:, None] * self.g_vec
         torque = jnp.zeros_like(w)
-        res = self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                             temperature, self.pair_details if details is None else details)
-        return res
+        return self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
+                              temperature, self.pair_details if details is None else details)
 
     @staticmethod
     def _without_details(contacts: Contacts) -> Contacts:

@@ -310,7 +310,8 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int, 
         model=eqx.partition(model, eqx.is_array)[0], k=jnp.asarray(0, jnp.int32), wall_time=z,
         rec_wall_time=z if record else None,
         pair=PairTimes(zc, zc if record else None),
-        count=ContactCount(zero, zero), dt=float(dt), Q_walls=jnp.zeros(n_walls) if per_wall else None,
+        count=ContactCount(zero, zero), dt=float(dt),
+        Q_walls=jnp.zeros(n_walls) if per_wall else None,
         # [heat.drum_wall]: the segments' temperatures and accounts
         wall=model.drum_wall.initial() if model.drum_wall is not None else None,
         friction=book)
