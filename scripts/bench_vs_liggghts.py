@@ -40,9 +40,9 @@ By default drumheat is timed through the product path, the built-in scene ``glas
 t_crit = 1.6e-5 s, the coupled heat of the scene: contact times every step, a thermal step every
 10) with ``dem.contact_backend`` = jax and cpu, its mechanics in float64 (``--precision``
 adds float32 rows, speed only: float32 positions resolve this drum coarsely, see
-scripts/precision_drum.py; and mixed rows: float64 positions, float32 forces); ``--bespoke`` times the DEM built here from
-the LIGGGHTS packing as before. The step cost per particle is what is compared; the step sizes
-differ (LIGGGHTS 1e-5 s).
+scripts/precision_drum.py; and mixed rows: float64 positions, float32 forces); ``--bespoke``
+times the DEM built here from the LIGGGHTS packing as before. The step cost per particle is
+what is compared; the step sizes differ (LIGGGHTS 1e-5 s).
 
 Usage: python scripts/bench_vs_liggghts.py [--n 2000 10000 50000] [--steps S] [--quick]
        [--ranks 1 2] [--workdir DIR] [--packings DIR] [--no-liggghts] [--thermal on|off]

@@ -224,13 +224,13 @@ class ContactForces:
         ``pair_details`` of the constructor."""
         force = self.mass[:, None] * self.g_vec
         torque = jnp.zeros_like(w)
-        return self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                              temperature, self.pair_details if details is None else details)
-
-    @staticmethod
-    def _without_details(contacts: Contacts) -> Contacts:
-        return contacts._replace(pair_mask=None, pair_overlap=None, pair_distance=None,
-                                 pair_normal_force=None)
+        details = self.pair_details if details is None else details
+        res = self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
+                             temperature, details)
+        if details:
+            return res
+        return res._replace(contacts=res.contacts._replace(
+            pair_mask=None, pair_overlap=None, pair_distance=None, pair_normal_force=None))
 
     def pair_positions(self, pos):
         """The positions the pair law reads: ``pos`` itself where it is in the mechanics'
@@ -253,6 +253,8 @@ class ContactForces:
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
                   temperature, details) -> ForceResult:  # pragma: no cover - abstract
+        """The forces and contacts; ``details`` False: the caller drops the per-pair details
+        (a kernel may skip computing them)."""
         raise NotImplementedError
 
     def dissipation(self, work, vel, w) -> Dissipation:  # pragma: no cover - abstract
@@ -380,8 +382,7 @@ class JaxContactForces(ContactForces):
         if c is not None and temperature is not None:
             heat = pair_heat_flow(temperature, contacts, self.radius_thermal, c.law,
                                   c.coefficient, c.gap_tolerance, pair_dist)
-        if not details:
-            contacts = self._without_details(contacts)
+        # (details: what the caller drops XLA does not compute)
         return ForceResult(force, torque, new_spring, new_wall_spring, contacts, max_ovl, heat,
                            work)
 
@@ -558,7 +559,7 @@ class CpuContactForces(ContactForces):
             self.pair_positions(pos), vel, w, self.radius, self.mass, self.inertia, self.ptype,
             nbrs.idx, pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
             pair_gap=self.gap_pp, order=nbrs.order, details=details)
-        active = ovl > 0 if details else None
+        active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
         # p_cond: the pairs within the conduction gap, pair_gap_mask's test in the C++ loop
         contacts = Contacts(
@@ -566,8 +567,6 @@ class CpuContactForces(ContactForces):
             pair_normal_force=fn, wall_particle=w_part, wall_index=w_idx, wall_id=w_id,
             wall_mask=w_mask, wall_overlap=w_ovl, wall_normal_force=w_fn, pair_conducts=p_cond,
             wall_conducts=self.wall_gap_mask(wd, w_mask))
-        if not details:
-            contacts = self._without_details(contacts)
         if c is None or temperature is None:
             heat = None
         work = None
