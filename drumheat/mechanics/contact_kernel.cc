@@ -303,7 +303,10 @@ inline void clear_unless(S* s, bool keep) {
     std::memcpy(&u, s + c, sizeof(S));
     bits |= u;
   }
-  if ((bits != 0) & !keep)
+  // the test on the bits masked by `keep` (GCC makes two branches of `(bits != 0) & !keep`,
+  // the first as unpredictable as whether the slot touches)
+  const U mask = U(0) - U(!keep);
+  if ((bits & mask) != 0)
     for (int c = 0; c < D; ++c) s[c] = S(0);
 }
 
@@ -439,13 +442,34 @@ DRUMHEAT_VECTOR_CLONES void pair_law_tile(Tile<S, D>& t, int cnt, S dt) {
 
 // What the scan finds for a block of pair slots (Loop::pairs): for each, d from i to j (the
 // nearest periodic image of the last axis), |d|^2, whether the pair lies within reach and
-// whether it conducts (output 11).
+// whether it conducts (output 11); and the radii and whether the slot holds a pair, which
+// gather_partners reads for the tests.
 template <typename S, int D>
 struct Block {
   static constexpr int N = 256;
-  alignas(64) S d[D][N], dist2[N];
-  alignas(64) unsigned char within[N], cd[N];
+  alignas(64) S d[D][N], dist2[N], ri[N], rj[N];
+  alignas(64) unsigned char within[N], cd[N], real[N];
 };
+
+// The partners' data of the pair slots [0, cnt) of (pi, pj) gathered into the Block for
+// within_reach: d from i to j (before the periodic image is taken), the radii and whether the
+// slot holds a pair (i < n; a padding slot reads particle 0). Compiled without target_clones,
+// for the baseline instruction set, which has no vector gathers.
+template <typename S, int D, bool RANKED>
+void gather_partners(const int32_t* __restrict pi, const int32_t* __restrict pj, int cnt,
+                     const S* __restrict x, const S* __restrict r, const int32_t* __restrict rk,
+                     int32_t n, Block<S, D>& b) {
+  for (int k = 0; k < cnt; ++k) {
+    const int32_t i0 = pi[k], j0 = pj[k];
+    const bool real = i0 < n;
+    const int32_t iu = real ? i0 : 0, ju = real ? j0 : 0;  // padding reads particle 0
+    const int32_t i = RANKED ? rk[iu] : iu, j = RANKED ? rk[ju] : ju;  // where their data lie
+    for (int c = 0; c < D; ++c) b.d[c][k] = x[D*j + c] - x[D*i + c];
+    b.ri[k] = r[i];
+    b.rj[k] = r[j];
+    b.real[k] = real;
+  }
+}
 
 // The Block of the pair slots k of (pi, pj) [0, cnt): d from i to j (the nearest periodic image
 // of the last axis with PERIODIC; with RANKED the partners' data read at their ranks rk) and
@@ -458,28 +482,28 @@ struct Block {
 // forces.ContactForces.pair_gap_mask, on the overlap computed as Loop::tile computes it). That
 // test needs only the distance and the radii, so it is made here for every slot, and a pair
 // within the gap cgap that does not touch is not gathered into a tile (in the built-in drum
-// about as many pairs lie within the gap as touch). 0 for a padding slot (i >= n). One loop
-// without branches over the slots, in vector instructions: the partners' data are read for
-// every listed pair here, and most lie out of reach in a turning bed.
+// about as many pairs lie within the gap as touch). 0 for a padding slot (i >= n). The
+// partners' data are read for every listed pair here, and most lie out of reach in a turning
+// bed: they are read first (gather_partners), one load after another, and the tests then run
+// over the Block in one loop without branches, in vector instructions (the vector gathers of
+// AVX2 cost more per element than as many plain loads).
 template <typename S, int D, bool PERIODIC, bool RANKED>
 DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int32_t* __restrict pj,
                                          int cnt, const S* __restrict x, const S* __restrict r,
                                          const int32_t* __restrict rk, int32_t n, S L, S gapf,
                                          S cgap, Block<S, D>& b) {
+  gather_partners<S, D, RANKED>(pi, pj, cnt, x, r, rk, n, b);
   for (int k = 0; k < cnt; ++k) {
-    const int32_t i0 = pi[k], j0 = pj[k];
-    const bool real = i0 < n;
-    const int32_t iu = real ? i0 : 0, ju = real ? j0 : 0;  // padding reads particle 0
-    const int32_t i = RANKED ? rk[iu] : iu, j = RANKED ? rk[ju] : ju;  // where their data lie
     S d[D];
-    for (int c = 0; c < D; ++c) d[c] = x[D*j + c] - x[D*i + c];
+    for (int c = 0; c < D; ++c) d[c] = b.d[c][k];
     if constexpr (PERIODIC) d[2] = nearest_image(d[2], L);
     const S dist2 = dot<S, D>(d, d);
-    const S ri = r[i], rj = r[j];
+    const S ri = b.ri[k], rj = b.rj[k];
     const S rmin = ri < rj ? ri : rj;
     const S gap = gapf*(S(2)*rmin), cg = cgap*(S(2)*rmin);
     const S re = (ri + rj) + gap;
-    for (int c = 0; c < D; ++c) b.d[c][k] = d[c];
+    const bool real = b.real[k];
+    if constexpr (PERIODIC) b.d[2][k] = d[2];
     b.dist2[k] = dist2;
     b.within[k] = real & !(dist2 > re*re*S(1.0001));
     const S ov = (ri + rj) - std::sqrt(dist2);
@@ -721,15 +745,20 @@ struct Loop {
       if (OV) for (int64_t k = b0; k < b1; ++k) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
       for (int64_t k = b0; k < b1; ++k) CD[k] = bl->cd[k - b0];
       if (fh) for (int64_t k = KP*b0; k < KP*b1; ++k) PW[k] = S(0);
+      if (fh)  // the opened contacts' rows, from the old springs before they are cleared
+        for (int64_t k = b0; k < b1; ++k)
+          if (!within[k - b0] && P[k] < n) {
+            const int32_t i = P[k], j = P[m + k];
+            opened<S>(pair_law(i, j), overlap0(at(i), at(j)), spring2(k), PW + KP*k + KP - 1,
+                      R);
+          }
+      // (a loop of its own: in this one a branch on `within`, which varies from slot to slot,
+      // would be mispredicted at every other slot)
       int64_t cnt = 0;
       for (int q = 0; q < nb; ++q) {
         const int64_t k = b0 + q;
         near[cnt] = k;
         cnt += within[q];
-        if (fh && !within[q] && P[k] < n) {  // read the old spring before it is cleared
-          const int32_t i = P[k], j = P[m + k];
-          opened<S>(pair_law(i, j), overlap0(at(i), at(j)), spring2(k), PW + KP*k + KP - 1, R);
-        }
         clear_unless<S, D>(Sn + D*k, within[q]);  // a padding slot is never within reach
       }
       for (int64_t q = 0; q < cnt; q += Tile<S, D>::N) {
