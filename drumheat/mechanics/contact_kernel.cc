@@ -106,6 +106,11 @@
 // chunk order, so the result depends on C (round-off) and on nothing else, whichever thread ran
 // which chunk.
 //
+// Records: each call first copies the particles' positions and radii, and their velocities,
+// spins, masses and moments of inertia, into one record per particle each (pack_particles; 12
+// values per particle, in a buffer that lives across calls), so that the pair loop reads a
+// partner's data from one cache line instead of from one per array.
+//
 // Vector instructions: a chunk takes its pair slots in blocks of 256; within_reach tells which
 // lie within reach, Loop::tile gathers those 64 at a time into a Tile (one array per quantity)
 // and pair_law_tile computes their contact law in one loop without branches, which the compiler
@@ -444,6 +449,11 @@ DRUMHEAT_VECTOR_CLONES void pair_law_tile(Tile<S, D>& t, int cnt, S dt) {
 // nearest periodic image of the last axis), |d|^2, whether the pair lies within reach and
 // whether it conducts (output 11); and the radii and whether the slot holds a pair, which
 // gather_partners reads for the tests.
+// values per particle of the packed positions and radii (x_0 .. x_{D-1}, r, padding) and of
+// the packed motion (v_0 .. v_{D-1}, the spin's DW components, mass, moment of inertia,
+// padding), pack_particles
+constexpr int XR = 4, VW = 8;
+
 template <typename S, int D>
 struct Block {
   static constexpr int N = 256;
@@ -453,20 +463,24 @@ struct Block {
 
 // The partners' data of the pair slots [0, cnt) of (pi, pj) gathered into the Block for
 // within_reach: d from i to j (before the periodic image is taken), the radii and whether the
-// slot holds a pair (i < n; a padding slot reads particle 0). Compiled without target_clones,
-// for the baseline instruction set, which has no vector gathers.
+// slot holds a pair (i < n; a padding slot reads particle 0). xr: each particle's position and
+// radius in one record of XR values (pack_particles), so that a partner's come from one cache
+// line. Compiled without target_clones, for the baseline instruction set, which has no vector
+// gathers.
 template <typename S, int D, bool RANKED>
 void gather_partners(const int32_t* __restrict pi, const int32_t* __restrict pj, int cnt,
-                     const S* __restrict x, const S* __restrict r, const int32_t* __restrict rk,
-                     int32_t n, Block<S, D>& b) {
+                     const S* __restrict xr, const int32_t* __restrict rk, int32_t n,
+                     Block<S, D>& b) {
   for (int k = 0; k < cnt; ++k) {
     const int32_t i0 = pi[k], j0 = pj[k];
     const bool real = i0 < n;
     const int32_t iu = real ? i0 : 0, ju = real ? j0 : 0;  // padding reads particle 0
     const int32_t i = RANKED ? rk[iu] : iu, j = RANKED ? rk[ju] : ju;  // where their data lie
-    for (int c = 0; c < D; ++c) b.d[c][k] = x[D*j + c] - x[D*i + c];
-    b.ri[k] = r[i];
-    b.rj[k] = r[j];
+    const S* __restrict a = xr + XR*i;
+    const S* __restrict c = xr + XR*j;
+    for (int q = 0; q < D; ++q) b.d[q][k] = c[q] - a[q];
+    b.ri[k] = a[D];
+    b.rj[k] = c[D];
     b.real[k] = real;
   }
 }
@@ -489,10 +503,10 @@ void gather_partners(const int32_t* __restrict pi, const int32_t* __restrict pj,
 // AVX2 cost more per element than as many plain loads).
 template <typename S, int D, bool PERIODIC, bool RANKED>
 DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int32_t* __restrict pj,
-                                         int cnt, const S* __restrict x, const S* __restrict r,
+                                         int cnt, const S* __restrict xr,
                                          const int32_t* __restrict rk, int32_t n, S L, S gapf,
                                          S cgap, Block<S, D>& b) {
-  gather_partners<S, D, RANKED>(pi, pj, cnt, x, r, rk, n, b);
+  gather_partners<S, D, RANKED>(pi, pj, cnt, xr, rk, n, b);
   for (int k = 0; k < cnt; ++k) {
     S d[D];
     for (int c = 0; c < D; ++c) d[c] = b.d[c][k];
@@ -648,6 +662,9 @@ struct Loop {
   // cell order: run() gathers the particles' data into that order, and the forces, torques and
   // heat are summed there); pt and every per-slot array stay in the particles' own numbering
   const int32_t* RK = nullptr;
+  // the positions and radii packed XR values per particle, and the velocities, spins, masses
+  // and moments of inertia VW values per particle (pack_particles; where x, r, v, w lie)
+  const S *XRp = nullptr, *VWp = nullptr;
   S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;  // OV, DI, FN null: not wanted
   bool* CD;
   const double* TK;
@@ -729,14 +746,14 @@ struct Loop {
       const int32_t n32 = static_cast<int32_t>(n);
       const S gapf = gap_on ? tol : S(0);
       if (D == 3 && L > S(0)) {
-        if (RK) within_reach<S, D, true, true>(P + b0, P + m + b0, nb, x, r, RK, n32, L, gapf,
+        if (RK) within_reach<S, D, true, true>(P + b0, P + m + b0, nb, XRp, RK, n32, L, gapf,
                                                cgap, *bl);
-        else within_reach<S, D, true, false>(P + b0, P + m + b0, nb, x, r, RK, n32, L, gapf,
+        else within_reach<S, D, true, false>(P + b0, P + m + b0, nb, XRp, RK, n32, L, gapf,
                                              cgap, *bl);
       } else {
-        if (RK) within_reach<S, D, false, true>(P + b0, P + m + b0, nb, x, r, RK, n32, L, gapf,
+        if (RK) within_reach<S, D, false, true>(P + b0, P + m + b0, nb, XRp, RK, n32, L, gapf,
                                                 cgap, *bl);
-        else within_reach<S, D, false, false>(P + b0, P + m + b0, nb, x, r, RK, n32, L, gapf,
+        else within_reach<S, D, false, false>(P + b0, P + m + b0, nb, XRp, RK, n32, L, gapf,
                                               cgap, *bl);
       }
       // zero where nothing touches (written here, while the lines are at hand: a sweep over
@@ -782,14 +799,15 @@ struct Loop {
       const int64_t k = near[q], b = k - b0;
       const int32_t iu = P[k], ju = P[m + k], i = at(iu), j = at(ju);
       const Law<S>& law = pair_law(iu, ju);
+      const S *ui = VWp + VW*i, *uj = VWp + VW*j;  // the partners' motion records
       for (int c = 0; c < D; ++c) {
-        t.d[c][q] = bl.d[c][b]; t.vi[c][q] = v[D*i + c]; t.vj[c][q] = v[D*j + c];
+        t.d[c][q] = bl.d[c][b]; t.vi[c][q] = ui[c]; t.vj[c][q] = uj[c];
         t.so[c][q] = sp[D*k + c];
       }
-      for (int c = 0; c < DW; ++c) { t.wi[c][q] = w[DW*i + c]; t.wj[c][q] = w[DW*j + c]; }
-      t.dist2[q] = bl.dist2[b]; t.ri[q] = r[i]; t.rj[q] = r[j];
-      t.mi[q] = ms[i]; t.mj[q] = ms[j];
-      if (roll_pp) { t.ii[q] = in[i]; t.ij[q] = in[j]; }
+      for (int c = 0; c < DW; ++c) { t.wi[c][q] = ui[D + c]; t.wj[c][q] = uj[D + c]; }
+      t.dist2[q] = bl.dist2[b]; t.ri[q] = XRp[XR*i + D]; t.rj[q] = XRp[XR*j + D];
+      t.mi[q] = ui[D + DW]; t.mj[q] = uj[D + DW];
+      if (roll_pp) { t.ii[q] = ui[D + DW + 1]; t.ij[q] = uj[D + DW + 1]; }
       t.kn[q] = law.kn; t.kt[q] = law.kt; t.gn[q] = law.gn; t.gt[q] = law.gt;
       t.mu[q] = law.mu; t.mur[q] = law.mur;
       if (fh) {  // before the spring is written
@@ -972,6 +990,41 @@ void gather(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp, const Layout<S, D
   lp.RK = lay.rank(buf);
 }
 
+// The particles' data as lp reads them (in the cell order after gather) packed into records,
+// in one buffer from the pool: the positions and radii XR values per particle, (x_0 .. x_{D-1},
+// r, 0 ...), read by the scan for both partners of every listed pair, and the velocities, spins,
+// masses and moments of inertia VW values per particle, read by the tiles for the pairs within
+// reach: each partner's come from one cache line instead of from one per array. lp.XRp and
+// lp.VWp are set to them; the caller gives the buffer back when the loop is done.
+template <typename S, int D>
+std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp) {
+  constexpr int DW = Loop<S, D>::DW;
+  static_assert(D + 1 <= XR && D + DW + 2 <= VW, "a record holds the particle's data");
+  const int64_t n = lp.n;
+  std::unique_ptr<Buffer> buf =
+      take_buffer((static_cast<int64_t>(sizeof(S))*(XR + VW)*n + 7)/8);
+  S* xr = reinterpret_cast<S*>(buf->data());
+  S* vw = xr + XR*n;
+  const S *x = lp.x, *r = lp.r, *v = lp.v, *w = lp.w, *ms = lp.ms, *in = lp.in;
+  for_chunks(pool, nc, [&](int c) {
+    for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) {
+      S* a = xr + XR*p;
+      for (int q = 0; q < D; ++q) a[q] = x[D*p + q];
+      a[D] = r[p];
+      for (int q = D + 1; q < XR; ++q) a[q] = S(0);
+      S* u = vw + VW*p;
+      for (int q = 0; q < D; ++q) u[q] = v[D*p + q];
+      for (int q = 0; q < DW; ++q) u[D + q] = w[DW*p + q];
+      u[D + DW] = ms[p];
+      u[D + DW + 1] = in[p];
+      for (int q = D + DW + 2; q < VW; ++q) u[q] = S(0);
+    }
+  });
+  lp.XRp = xr;
+  lp.VWp = vw;
+  return buf;
+}
+
 template <typename S, int D>
 bool run(ffi::ThreadPool& pool, const Call& a) {
   constexpr int DW = Loop<S, D>::DW;
@@ -992,6 +1045,7 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   const Chunks ch = chunks(pool, a.P, n, m, a.nw, ranked ? layout.rank(*lay) : nullptr);
   const int64_t nc = ch.nc;
   if (ranked) gather<S, D>(pool, nc, lp, layout, *lay);
+  std::unique_ptr<Buffer> packed = pack_particles<S, D>(pool, nc, lp);
   auto work = [&](const Chunks& ch, int64_t c, S* F, S* T, double* Q, double* R) -> S {
     lp.padding(ch.pb[c], ch.pb[c + 1]);
     const S p = lp.pairs(ch.kb[c], ch.kb[c + 1], F, T, Q, R);
@@ -1071,6 +1125,7 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
     give_buffer(std::move(lay));
   }
   for (auto& b : acc) give_buffer(std::move(b));
+  give_buffer(std::move(packed));
   MX[0] = max_ov;
   return true;
 }
