@@ -445,15 +445,15 @@ DRUMHEAT_VECTOR_CLONES void pair_law_tile(Tile<S, D>& t, int cnt, S dt) {
   }
 }
 
-// What the scan finds for a block of pair slots (Loop::pairs): for each, d from i to j (the
-// nearest periodic image of the last axis), |d|^2, whether the pair lies within reach and
-// whether it conducts (output 11); and the radii and whether the slot holds a pair, which
-// gather_partners reads for the tests.
 // values per particle of the packed positions and radii (x_0 .. x_{D-1}, r, padding) and of
 // the packed motion (v_0 .. v_{D-1}, the spin's DW components, mass, moment of inertia,
 // padding), pack_particles
 constexpr int XR = 4, VW = 8;
 
+// What the scan finds for a block of pair slots (Loop::pairs): for each, d from i to j (the
+// nearest periodic image of the last axis), |d|^2, whether the pair lies within reach and
+// whether it conducts (output 11); and the radii and whether the slot holds a pair, which
+// gather_partners reads for the tests.
 template <typename S, int D>
 struct Block {
   static constexpr int N = 256;
