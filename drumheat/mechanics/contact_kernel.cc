@@ -89,7 +89,7 @@
 // stay in the particles' numbering. (Laying the data out in the cell order alone, with the
 // pairs taken in the order of the numbering, gained nothing: docs/performance.md.) An order
 // 0 .. N-1, which the build gives while the particles' own numbering keeps neighbours near in
-// memory (NeighborSetup.layout_order), means no copies: the loop runs as without an order.
+// memory (NeighborSetup.layout_order), means no reordering: the loop runs as without an order.
 //
 // Threads: the particles are cut into C equal ranges (of indices, or of ranks in the cell
 // order), C = the threads of XLA's intra-op pool, at most one per MIN_CHUNK listed pairs
@@ -108,8 +108,9 @@
 //
 // Records: each call first copies the particles' positions and radii, and their velocities,
 // spins, masses and moments of inertia, into one record per particle each (pack_particles; 12
-// values per particle, in a buffer that lives across calls), so that the pair loop reads a
-// partner's data from one cache line instead of from one per array.
+// values per particle, in a buffer that lives across calls; in the cell order where there is
+// one: this copy is the one that lays the data out), so that the pair loop reads a partner's
+// data from one cache line instead of from one per array.
 //
 // Vector instructions: a chunk takes its pair slots in blocks of 256; within_reach tells which
 // lie within reach, Loop::tile gathers those 64 at a time into a Tile (one array per quantity)
@@ -658,12 +659,13 @@ struct Loop {
   int64_t n, m, nw, nt;
   const S *x, *v, *w, *r, *ms, *in, *sp, *WD, *WN, *WV, *WS, *WOM, *WD0;
   const int32_t *pt, *P;
-  // RK: null, or where each particle's data lie in x, v, w, r, ms, in and TK (its rank in the
-  // cell order: run() gathers the particles' data into that order, and the forces, torques and
-  // heat are summed there); pt and every per-slot array stay in the particles' own numbering
+  // RK: null, or where each particle's data lie in XRp, VWp and TK (its rank in the cell
+  // order: run() lays the particles' data out in that order, and the forces, torques and heat
+  // are summed there); pt and every per-slot array stay in the particles' own numbering
   const int32_t* RK = nullptr;
-  // the positions and radii packed XR values per particle, and the velocities, spins, masses
-  // and moments of inertia VW values per particle (pack_particles; where x, r, v, w lie)
+  // the particles' data as the loop reads them (pack_particles): the positions and radii, XR
+  // values per particle, and the velocities, spins, masses and moments of inertia, VW values
+  // per particle (x, v, w, r, ms, in above are the inputs in the particles' own numbering)
   const S *XRp = nullptr, *VWp = nullptr;
   S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;  // OV, DI, FN null: not wanted
   bool* CD;
@@ -710,8 +712,8 @@ struct Loop {
   // step's drift (read before the spring is written)
   S spring2(int64_t k) const { return fh ? dot<S, D>(sp + D*k, sp + D*k) : S(0); }
   S overlap0(int32_t i, int32_t j) const {  // i, j: where their data lie (at)
-    return fh ? overlap_before<S, D>(x + D*i, x + D*j, v + D*i, v + D*j, r[i] + r[j], dt, L)
-              : S(0);
+    const S *a = XRp + XR*i, *b = XRp + XR*j;
+    return fh ? overlap_before<S, D>(a, b, VWp + VW*i, VWp + VW*j, a[D] + b[D], dt, L) : S(0);
   }
 
   // padding slots [p0, p1) (past the listed pairs): the outputs of a pair that does not touch
@@ -881,7 +883,8 @@ struct Loop {
     const S* so = WS + D*q;
     S* hw = fh ? WW + KW*q : nullptr;  // friction heat row (header)
     if (fh) for (int c = 0; c < KW; ++c) hw[c] = S(0);
-    const S rp = r[p];
+    const S* u = VWp + VW*p;  // its velocity, spin, mass and moment of inertia
+    const S rp = XRp[XR*p + D];
     const S ov = rp - WD[q];
     const Law<S>& law = pw[(one_type ? 0 : pt[pu])*nw + wl];
     const S xi2 = fh ? dot<S, D>(so, so) : S(0);
@@ -896,10 +899,10 @@ struct Loop {
     const S l = -(rp - S(0.5)*ov);
     S al[D], cw[D], vr[D], f[D], M[DW] = {};
     for (int c = 0; c < D; ++c) al[c] = l*nr[c];
-    spin_cross<S, D>(w + DW*p, al, cw);
-    for (int c = 0; c < D; ++c) vr[c] = v[D*p + c] + cw[c] - WV[D*q + c];
+    spin_cross<S, D>(u + D, al, cw);
+    for (int c = 0; c < D; ++c) vr[c] = u[c] + cw[c] - WV[D*q + c];
     S loss[2];
-    const S fn = contact<S, D>(law, dt, nr, ov, vr, ms[p], so, s, f, fh ? loss : nullptr);
+    const S fn = contact<S, D>(law, dt, nr, ov, vr, u[D + DW], so, s, f, fh ? loss : nullptr);
     if (fh) { R[0] += double(loss[0]); R[1] += double(loss[1]); }
     WF[q] = fn;
     for (int c = 0; c < D; ++c) F[D*p + c] += f[c];
@@ -907,11 +910,11 @@ struct Loop {
       add_torque<S, D>(T + DW*p, al, f, S(1));
       if (roll_pw) {
         S wr[DW];
-        for (int c = 0; c < DW; ++c) wr[c] = w[DW*p + c];
+        for (int c = 0; c < DW; ++c) wr[c] = u[D + c];
         wr[DW - 1] -= WOM[wl];  // the wall spins about z
-        rolling<S, DW>(wr, fn, rp, law.mur, in[p], dt, M);
+        rolling<S, DW>(wr, fn, rp, law.mur, u[D + DW + 1], dt, M);
         for (int c = 0; c < DW; ++c) T[DW*p + c] += M[c];
-        if (fh) R[2] += double(rolling_loss<S, DW>(M, wr, in[p], dt));
+        if (fh) R[2] += double(rolling_loss<S, DW>(M, wr, u[D + DW + 1], dt));
       }
     }
     if (fh) {
@@ -928,19 +931,15 @@ struct Loop {
 };
 
 // The layout of the cell order (Call::order) in one buffer: the ranks (N s32: where each
-// particle's data lie), then x, v (D N), w (DW N), r, ms, in (N) in S, then the temperatures (N
-// doubles, with conduction). ranks() fills the ranks, gather() copies the data, the chunks'
-// threads a range of ranks each.
-template <typename S, int D>
+// particle's data lie), then the temperatures (N doubles, with conduction). ranks() fills the
+// ranks, gather_temperatures() the temperatures, pack_particles() lays the particles' other
+// data out in the same order; the chunks' threads take a range of ranks each.
 struct Layout {
-  static constexpr int DW = D == 3 ? 3 : 1;
-  int64_t n, nr, ns;
-  explicit Layout(int64_t n_)
-      : n(n_), nr((4*n_ + 7)/8), ns((static_cast<int64_t>(sizeof(S))*(2*D + DW + 3)*n_ + 7)/8) {}
-  int64_t doubles() const { return nr + ns + n; }
+  int64_t n, nr;
+  explicit Layout(int64_t n_) : n(n_), nr((4*n_ + 7)/8) {}
+  int64_t doubles() const { return nr + n; }
   int32_t* rank(Buffer& b) const { return reinterpret_cast<int32_t*>(b.data()); }
-  S* data(Buffer& b) const { return reinterpret_cast<S*>(b.data() + nr); }
-  double* temp(Buffer& b) const { return b.data() + nr + ns; }
+  double* temp(Buffer& b) const { return b.data() + nr; }
 };
 
 // whether `order` (N) is 0 .. N-1 (the numbering will do: no layout; one pass without an early
@@ -967,37 +966,32 @@ bool ranks(const int32_t* order, int64_t n, int32_t* rk) {
   return true;
 }
 
+// the temperatures in the cell order (with conduction), and the ranks, for lp
 template <typename S, int D>
-void gather(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp, const Layout<S, D>& lay,
-            Buffer& buf) {
-  constexpr int DW = Loop<S, D>::DW;
+void gather_temperatures(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp, const Layout& lay,
+                         Buffer& buf) {
   const int64_t n = lp.n;
-  S* xs = lay.data(buf);
-  S *vs = xs + D*n, *ws = vs + D*n, *rs = ws + DW*n, *mss = rs + n, *ins = mss + n;
-  double* ts = lay.temp(buf);
   const int32_t* od = lp.a.order;
-  for_chunks(pool, nc, [&](int c) {
-    for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) {
-      const int64_t u = od[p];
-      for (int q = 0; q < D; ++q) { xs[D*p + q] = lp.x[D*u + q]; vs[D*p + q] = lp.v[D*u + q]; }
-      for (int q = 0; q < DW; ++q) ws[DW*p + q] = lp.w[DW*u + q];
-      rs[p] = lp.r[u]; mss[p] = lp.ms[u]; ins[p] = lp.in[u];
-      if (lp.heat_on) ts[p] = lp.TK[u];
-    }
-  });
-  lp.x = xs; lp.v = vs; lp.w = ws; lp.r = rs; lp.ms = mss; lp.in = ins;
-  if (lp.heat_on) lp.TK = ts;
+  if (lp.heat_on) {
+    double* ts = lay.temp(buf);
+    for_chunks(pool, nc, [&](int c) {
+      for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) ts[p] = lp.TK[od[p]];
+    });
+    lp.TK = ts;
+  }
   lp.RK = lay.rank(buf);
 }
 
-// The particles' data as lp reads them (in the cell order after gather) packed into records,
+// The particles' data packed into records, in the cell order `od` (null: their own numbering),
 // in one buffer from the pool: the positions and radii XR values per particle, (x_0 .. x_{D-1},
 // r, 0 ...), read by the scan for both partners of every listed pair, and the velocities, spins,
 // masses and moments of inertia VW values per particle, read by the tiles for the pairs within
-// reach: each partner's come from one cache line instead of from one per array. lp.XRp and
-// lp.VWp are set to them; the caller gives the buffer back when the loop is done.
+// reach and by the walls: each partner's come from one cache line instead of from one per
+// array, and the one copy lays them out in the cell order too. lp.XRp and lp.VWp are set to
+// them; the caller gives the buffer back when the loop is done.
 template <typename S, int D>
-std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp) {
+std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp,
+                                       const int32_t* od) {
   constexpr int DW = Loop<S, D>::DW;
   static_assert(D + 1 <= XR && D + DW + 2 <= VW, "a record holds the particle's data");
   const int64_t n = lp.n;
@@ -1008,15 +1002,16 @@ std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S
   const S *x = lp.x, *r = lp.r, *v = lp.v, *w = lp.w, *ms = lp.ms, *in = lp.in;
   for_chunks(pool, nc, [&](int c) {
     for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) {
+      const int64_t i = od ? od[p] : p;  // the particle whose data lie at p
       S* a = xr + XR*p;
-      for (int q = 0; q < D; ++q) a[q] = x[D*p + q];
-      a[D] = r[p];
+      for (int q = 0; q < D; ++q) a[q] = x[D*i + q];
+      a[D] = r[i];
       for (int q = D + 1; q < XR; ++q) a[q] = S(0);
       S* u = vw + VW*p;
-      for (int q = 0; q < D; ++q) u[q] = v[D*p + q];
-      for (int q = 0; q < DW; ++q) u[D + q] = w[DW*p + q];
-      u[D + DW] = ms[p];
-      u[D + DW + 1] = in[p];
+      for (int q = 0; q < D; ++q) u[q] = v[D*i + q];
+      for (int q = 0; q < DW; ++q) u[D + q] = w[DW*i + q];
+      u[D + DW] = ms[i];
+      u[D + DW + 1] = in[i];
       for (int q = D + DW + 2; q < VW; ++q) u[q] = S(0);
     }
   });
@@ -1036,7 +1031,7 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   // its own buffer, and the sums are put back in the particles' numbering at the end; without,
   // chunk 0 sums into the outputs
   const bool ranked = layout_in_use(a.order, n);
-  const Layout<S, D> layout(n);
+  const Layout layout(n);
   std::unique_ptr<Buffer> lay;
   if (ranked) {
     lay = take_buffer(layout.doubles());
@@ -1044,8 +1039,8 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   }
   const Chunks ch = chunks(pool, a.P, n, m, a.nw, ranked ? layout.rank(*lay) : nullptr);
   const int64_t nc = ch.nc;
-  if (ranked) gather<S, D>(pool, nc, lp, layout, *lay);
-  std::unique_ptr<Buffer> packed = pack_particles<S, D>(pool, nc, lp);
+  if (ranked) gather_temperatures<S, D>(pool, nc, lp, layout, *lay);
+  std::unique_ptr<Buffer> packed = pack_particles<S, D>(pool, nc, lp, ranked ? a.order : nullptr);
   auto work = [&](const Chunks& ch, int64_t c, S* F, S* T, double* Q, double* R) -> S {
     lp.padding(ch.pb[c], ch.pb[c + 1]);
     const S p = lp.pairs(ch.kb[c], ch.kb[c + 1], F, T, Q, R);
