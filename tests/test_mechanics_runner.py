@@ -252,6 +252,34 @@ def test_3d_periodic_drum_turns_stably():
     assert angle_of_repose(pos, r) > 15.0
 
 
+def test_run_steps_equal_the_step_one_by_one():
+    """``run_steps`` (runs of steps between rebuilds, each step's last half-kick carried to the
+    next step) gives the states of :meth:`DEM.step` called step by step, bit for bit: 3D, spins,
+    neighbour rebuilds on the way; and a run of no steps leaves the state as it is."""
+    R, r, L = 0.025, 0.002, 0.016
+    sites = insertion_sites([DrumShell(R)], 3, 2.2 * r, 1.05 * r, periodic_length=L)
+    sites = sites[np.argsort(sites[:, 1], kind="stable")][:60]
+    part = make_particles(np.full(len(sites), r), 2500.0)
+    p = contact_params(2e4, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
+    dem = make_dem(part, [DrumShell(R, rpm=60.0)], p, dim=3, periodic_length=L)
+    s0 = dem.run(dem.init(sites), 3000)  # falling onto the turning shell
+    n = 400
+    a = dem.run_steps(s0, n)
+    b = s0
+    for _ in range(n):
+        b = dem.step(b)[0]
+    assert int(a.n_rebuilds) - int(s0.n_rebuilds) >= 2
+    assert int(b.n_rebuilds) == int(a.n_rebuilds)
+    for name in ("position", "velocity", "angular_velocity", "force", "torque", "pair_spring",
+                 "wall_spring"):
+        np.testing.assert_array_equal(np.asarray(getattr(a, name)),
+                                      np.asarray(getattr(b, name)), err_msg=name)
+    assert float(jnp.max(jnp.abs(a.angular_velocity))) > 0.0
+    z = dem.run_steps(s0, 0)
+    for name in ("position", "velocity", "angular_velocity"):
+        np.testing.assert_array_equal(np.asarray(getattr(z, name)), np.asarray(getattr(s0, name)))
+
+
 def test_default_step_is_the_smaller_of_the_two_limits():
     """dt = min(safety_factor t_crit, dashpot limit); the dashpot limit of equal spheres with
     k_t = k_n is (sqrt(2) / (5 z zeta_t)) sqrt(m/k) (drumheat.models.soft_sphere)."""

@@ -581,15 +581,16 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         pos, nbrs, spring, count, pdata = args
         return nbrs, spring, count, pdata
 
+    def half_kick(v, w, f, tq):
+        """``v + dt/2 F/m``, ``w + dt/2 M/I`` (w unchanged without rotation)."""
+        v = v + half * f * inv_m[:, None]
+        if rotation:
+            w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
+        return v, w
+
     def kick(state: DEMState):
         """First half-kick: half-step velocities and spins."""
-        v = state.velocity + half * state.force * inv_m[:, None]
-        if rotation:
-            tq = state.torque
-            w = state.angular_velocity + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
-        else:
-            w = state.angular_velocity
-        return v, w
+        return half_kick(state.velocity, state.angular_velocity, state.force, state.torque)
 
     def drift(state: DEMState, kicked=None):
         """First half-kick (``kicked`` if given) and drift: half-step velocities, spins and
@@ -625,9 +626,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             temperature=extra if conduction is not None else None)
         if external_force is not None:
             f = f + external_force(x, v, t, extra).astype(dtype)
-        v = v + half * f * inv_m[:, None]
-        if rotation:
-            w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
+        v, w = half_kick(v, w, f, tq)
         if work is not None:  # friction heat: the contacts' losses at the full-step velocities
             contacts = contacts._replace(dissipation=forces.dissipation(work, v, w))
         new = DEMState(position=x, velocity=v, angular_velocity=w, force=f, torque=tq, time=t,
@@ -677,26 +676,49 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
         the trajectory, are those of :func:`step`.
         """
-        # the carry holds the coming step's half-kick, computed once; its positions are
-        # computed twice (the same values), in the loop condition, which tests them against
-        # the skin, and in the step: carried, they made XLA copy them every step (from the
-        # carry's drift into the state)
+        # The loop carries each step's state with its last half-kick pending (`pend`):
+        # velocities and spins at the half step, which the next step kicks twice (the last
+        # half-kick of its predecessor, then its own first one) before its drift, and the
+        # loop's end once. The same additions in the same order as `step`'s, so the same
+        # numbers; but the full-step velocities, which nothing in the loop reads, are no longer
+        # written every step (two passes over (N, 3) less). `pend` is 0 for the chunk's start
+        # state, whose velocities are full-step (adding 0 x the kick leaves them as they are).
+        # A `boundary_update` may change the full-step velocities: then the carry holds the
+        # coming step's half-kick instead, computed once from them.
+        # The coming step's positions are computed twice (the same values), in the loop
+        # condition, which tests them against the skin, and in the step: carried, they made
+        # XLA copy them every step (from the carry's drift into the state).
+        pending = boundary_update is None
+
+        def kicked(st, aux):
+            if not pending:
+                return aux
+            v, w = half_kick(st.velocity, st.angular_velocity, aux * st.force, aux * st.torque)
+            return half_kick(v, w, st.force, st.torque)
+
         def advance(c, pairs):
-            st, k, kicked = c
-            new = step(st, pairs, drift(st, kicked))[0]
-            return new, k + 1, kick(new)
+            st, k, aux = c
+            v, w, x = drift(st, kicked(st, aux))
+            new = step(st, pairs, (v, w, x))[0]
+            if not pending:
+                return new, k + 1, kick(new)
+            return new._replace(velocity=v, angular_velocity=w), k + 1, jnp.ones_like(aux)
 
         def go_on(c):
-            st, k, kicked = c
-            return (k < n_steps) & ~needs_rebuild(st, drift(st, kicked)[2])
+            st, k, aux = c
+            return (k < n_steps) & ~needs_rebuild(st, drift(st, kicked(st, aux))[2])
 
         def segment(c):
             c = jax.lax.while_loop(go_on, lambda c: advance(c, "keep"), c)
             return jax.lax.cond(c[1] < n_steps, lambda c: advance(c, "rebuild"), lambda c: c, c)
 
         k0 = jnp.zeros_like(jnp.asarray(n_steps))
-        return jax.lax.while_loop(lambda c: c[1] < n_steps, segment,
-                                  (state, k0, kick(state)))[0]
+        aux = jnp.zeros((), state.force.dtype) if pending else kick(state)
+        st, _, aux = jax.lax.while_loop(lambda c: c[1] < n_steps, segment, (state, k0, aux))
+        if not pending:
+            return st
+        v, w = half_kick(st.velocity, st.angular_velocity, aux * st.force, aux * st.torque)
+        return st._replace(velocity=v, angular_velocity=w)
 
     return step, run_steps, energies
 
