@@ -28,7 +28,7 @@ R_P = 0.002  # particle radius (m)
 
 def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling=True,
          rotation=True, calm=False, friction_heat=None, shuffle=False, layers=4,
-         position_dtype=None, contact_details=True):
+         position_dtype=None, contact_details=True, one_material=False):
     """A small moving bed of two materials with rolling resistance in the lower half of an
     annulus between a rotating drum shell and a counter-rotating inner cylinder (2D, or a 3D
     slice with periodic z): spheres of 0.97-1 r on a 1.97 r lattice, jittered, so that many
@@ -37,7 +37,8 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     Coulomb limit, most not), a temperature gradient. ``calm``: for runs, a 2 r lattice that
     touches nothing yet (gaps up to 1e-4 d), moving slowly, no springs, set in motion by
     gravity (50 g) and the walls. Returns the DEM and a state (None for kernel "cpu": the
-    state of the "jax" twin serves both). ``friction_heat``: make_dem's (a FrictionHeat, or a
+    state of the "jax" twin serves both). ``one_material``: equal spheres (0.985 r) of one
+    material instead (the rest as above). ``friction_heat``: make_dem's (a FrictionHeat, or a
     function of the particles that gives one). ``shuffle``: the particles numbered at random
     (else along the lattice, so that neighbours lie near each other in the numbering).
     ``layers``: lattice layers along the periodic z (3D); ``position_dtype``: make_dem's (the
@@ -68,6 +69,8 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
         pts = pts[rng.permutation(n)]
     radius = R_P * rng.uniform(0.9999 if calm else 0.97, 1.0, n)
     ptype = rng.integers(0, 2, n)
+    if one_material:
+        radius, ptype = np.full(n, 0.985 * R_P), np.zeros(n, int)
     part = make_particles(radius, np.where(ptype == 0, 2500.0, 2700.0), ptype=ptype)
     two = lambda a, b, c: np.array([[a, b], [b, c]])  # noqa: E731  symmetric (T, T)
     walls = [DrumShell(R, rpm=30.0), InnerCylinder(r_in, rpm=-20.0)]
@@ -80,6 +83,11 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
         wall_friction=np.array([[0.6, 0.3], [0.4, 0.5]]),
         rolling_friction=two(0.05, 0.1, 0.02) * rolling,
         wall_rolling_friction=np.array([[0.08, 0.03], [0.0, 0.1]]) * rolling, n_types=2)
+    if one_material:
+        params = contact_params(1e5, kt=0.9e5, kn_wall=1.2e5, kt_wall=1e5, damping_ratio=0.3,
+                                wall_damping_ratio=0.2, tangential_damping_ratio=0.25,
+                                friction=0.5, wall_friction=0.4, rolling_friction=0.05 * rolling,
+                                wall_rolling_friction=0.08 * rolling)
     cond = PairConduction(law, 1e3 if law == "projected" else 2.0,
                           np.asarray(part.mass) * 836.0, gap_tolerance)
     # calm: dt = 0.05 t_crit, where the round-off differences of the two kernels stay
@@ -218,6 +226,30 @@ def test_one_step_equals_the_jax_kernel(dim, dtype, law, tol):
     q0 = heat_flow(st.extra, ca, jdem.particles.radius, law, jdem.conduction.coefficient)
     more = np.sum(~np.isclose(np.asarray(q0), np.asarray(a[6]), rtol=1e-6, atol=0))
     assert more > 5 if (law == "projected" and tol > 0) else more == 0
+
+
+@needs_kernel
+@pytest.mark.parametrize("dim", [2, 3])
+def test_equal_spheres_of_one_material_pass_one_value(monkeypatch, dim):
+    """Radii, masses and moments of inertia that all particles share go to the C++ loop as one
+    value each (``cpu_kernel.uniform_or_all``), the types not at all with one material: the
+    same forces, torques, springs and heat flows as with the per-particle arrays, bit for bit,
+    and the JAX kernel's to round-off."""
+    jdem, st = _bed(dim, jnp.float64, "jax", "projected", 0.05, one_material=True)
+    cdem, _ = _bed(dim, jnp.float64, "cpu", "projected", 0.05, one_material=True)
+    assert [a.shape for a in cdem._forces.__wrapped__.func._kernel_particles] == [(1,)] * 4
+    monkeypatch.setattr(cpu_kernel, "uniform_or_all", lambda values: values)
+    fdem, _ = _bed(dim, jnp.float64, "cpu", "projected", 0.05, one_material=True)
+    n = jdem.particles.n
+    assert [a.shape for a in fdem._forces.__wrapped__.func._kernel_particles] == [(n,)] * 3 + [(1,)]
+    a, b, c = _forces(jdem, st), _forces(cdem, st), _forces(fdem, st)
+    assert int(jnp.sum(b[4].pair_mask)) > (40 if dim == 2 else 150)
+    assert float(jnp.max(jnp.abs(b[1]))) > 0.0  # rolling resistance and spins: inertia read
+    for k, what in enumerate(["force", "torque", "pair springs", "wall springs"]):
+        np.testing.assert_array_equal(np.asarray(b[k]), np.asarray(c[k]), err_msg=what)
+        _close(a[k], b[k], REL[jnp.float64], what)
+    np.testing.assert_array_equal(np.asarray(b[6]), np.asarray(c[6]))
+    _close(a[6], b[6], REL[jnp.float64], "heat flow")
 
 
 @needs_kernel

@@ -636,6 +636,8 @@ void for_chunks(ffi::ThreadPool& pool, int64_t nc, std::function<void(int)> run)
 // the buffers of one call, untyped (their dtype is checked in ContactsImpl)
 struct Call {
   const void *x, *v, *w, *r, *ms, *in, *sp, *wd, *wn, *wv, *ws, *tpp, *tpw, *wom, *wd0;
+  // the strides of r, ms and in: 1, or 0 where one value stands for every particle
+  int64_t r_step = 1, ms_step = 1, in_step = 1;
   const int32_t *pt, *P, *order;  // order: null, or the particles in the order of their cells
   const double* temp;
   void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX, *PW, *WW;
@@ -1000,18 +1002,19 @@ std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S
   S* xr = reinterpret_cast<S*>(buf->data());
   S* vw = xr + XR*n;
   const S *x = lp.x, *r = lp.r, *v = lp.v, *w = lp.w, *ms = lp.ms, *in = lp.in;
+  const int64_t sr = lp.a.r_step, sm = lp.a.ms_step, si = lp.a.in_step;
   for_chunks(pool, nc, [&](int c) {
     for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) {
       const int64_t i = od ? od[p] : p;  // the particle whose data lie at p
       S* a = xr + XR*p;
       for (int q = 0; q < D; ++q) a[q] = x[D*i + q];
-      a[D] = r[i];
+      a[D] = r[sr*i];
       for (int q = D + 1; q < XR; ++q) a[q] = S(0);
       S* u = vw + VW*p;
       for (int q = 0; q < D; ++q) u[q] = v[D*i + q];
       for (int q = 0; q < DW; ++q) u[D + q] = w[DW*i + q];
-      u[D + DW] = ms[i];
-      u[D + DW + 1] = in[i];
+      u[D + DW] = ms[sm*i];
+      u[D + DW + 1] = in[si*i];
       for (int q = D + DW + 2; q < VW; ++q) u[q] = S(0);
     }
   });
@@ -1261,6 +1264,20 @@ static ffi::Error ContactsImpl(
   a.m = pairs.dimensions()[1];
   a.nw = wdist.dimensions().size() > 1 ? wdist.dimensions()[1] : 0;
   a.nt = tab_pp.dimensions()[1];
+  // radius, mass, inertia: one per particle, or one for all (stride 0); the types: one per
+  // particle, or none read with one type
+  int64_t* steps[] = {&a.r_step, &a.ms_step, &a.in_step};
+  const ffi::AnyBuffer* per[] = {&rad, &mass, &inertia};
+  for (int q = 0; q < 3; ++q) {
+    const int64_t k = static_cast<int64_t>(per[q]->element_count());
+    if (k != a.n && k != 1)
+      return ffi::Error::InvalidArgument("drumheat_contacts: radius, mass and inertia must "
+                                         "have length N or 1");
+    *steps[q] = k == a.n ? 1 : 0;
+  }
+  if (static_cast<int64_t>(ptype.element_count()) != a.n && a.nt != 1)
+    return ffi::Error::InvalidArgument("drumheat_contacts: the types must have length N "
+                                       "(or any with one type)");
   a.dt = dt; a.L = L; a.h = h; a.tol = tol; a.law = law; a.rot = rot != 0; a.fh = fh != 0;
   a.cgap = cgap;
   const int dw = dim == 3 ? 3 : 1;

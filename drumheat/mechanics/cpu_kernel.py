@@ -259,6 +259,15 @@ def check_supported(dim, params, dtype, batch_axis) -> None:
 _TABLES = ("kn", "kt", "zeta_n", "zeta_t", "mu", "mu_roll")
 
 
+def uniform_or_all(values):
+    """``values`` (a concrete per-particle array) as :func:`contacts` may take it: the one
+    value, shape (1,), where all particles share it, else the array as it is."""
+    a = np.asarray(values)
+    if a.size > 1 and np.all(a == a.reshape(-1)[0]):
+        return jnp.asarray(a.reshape(-1)[:1])
+    return values
+
+
 def kernel_params(params, n_walls, dtype, dt, wall_omega, periodic_length=None,
                   rotation=True) -> dict:
     """The static inputs of :func:`contacts` for a DEM: ``params`` (ContactParams) as the
@@ -295,7 +304,9 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
     Args:
       pos, vel: positions, velocities (N, D), D = 2 or 3; omega: spins (N, 3), or (N,) about z
         in 2D.
-      radius, mass, inertia: (N,); ptype: material type of each particle (N,) int.
+      radius, mass, inertia: (N,), or (1,) for one value that all particles share
+        (:func:`uniform_or_all`); ptype: material type of each particle (N,) int (with one
+        type, in ``tables_pp``, any length: it is not read).
       idx: (2, M) OrderedSparse neighbour pairs (padding N); spring: (M, D) tangential springs.
       wall_distance: (N, W) distance of each particle centre from each wall; wall_normal:
         (N, W, D) unit normal from the wall towards the particle; wall_velocity: (N, W, D)

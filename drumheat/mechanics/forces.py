@@ -541,6 +541,12 @@ class CpuContactForces(ContactForces):
         self._kernel_params = cpu_kernel.kernel_params(
             self.params, self.n_w, self.dtype, self.dt, self.wall_omega,
             self.fold_length or self.periodic_length, self.rotation)
+        # the radii, masses and moments of inertia as the loop takes them: one value where all
+        # particles share it (XLA turned such a constant into a broadcast that it wrote out
+        # anew every step), the types not at all with one type
+        self._kernel_particles = (
+            *(cpu_kernel.uniform_or_all(a) for a in (self.radius, self.mass, self.inertia)),
+            self.ptype if self.params.n_types > 1 else jnp.zeros((1,), jnp.int32))
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
                   temperature, details) -> ForceResult:
@@ -556,8 +562,7 @@ class CpuContactForces(ContactForces):
                                                                    t - self.dt)[0]
         (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, p_cond,
          pair_rows, wall_rows, rates) = self._kernel.contacts(
-            self.pair_positions(pos), vel, w, self.radius, self.mass, self.inertia, self.ptype,
-            nbrs.idx, pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
+            self.pair_positions(pos), vel, w, *self._kernel_particles, nbrs.idx, pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
             pair_gap=self.gap_pp, order=nbrs.order, details=details)
         active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
