@@ -105,6 +105,30 @@ def test_neighbour_overflow_is_reallocated_and_redone():
     assert bool(raw.nbrs.did_buffer_overflow)
 
 
+def test_default_capacity_is_that_of_a_dense_bed():
+    """A dilute start gets the pair capacity of a dense bed of its particles (the mean count of
+    neighbours at random close packing in 3D, at least the hexagonal first shell in 2D) with
+    the allocation's head room; a start with more pairs sizes the list from its own."""
+    from drumheat.mechanics.neighbors import DENSE_FRACTION, dense_bed_pairs
+
+    r = np.full(5, 0.004)
+    c = 0.008 + 0.002
+    assert dense_bed_pairs(r, c, 3) == pytest.approx(0.5 * (0.64 * (c / 0.004) ** 3 - 1))
+    # sizes: <r^3>, so a few large spheres among small ones count as their volume says
+    mix = np.array([0.002] * 4 + [0.004])
+    assert dense_bed_pairs(mix, c, 3) == pytest.approx(
+        0.5 * (DENSE_FRACTION[3] * c**3 / np.mean(mix**3) - 1))
+    assert dense_bed_pairs(np.full(5, 0.002), 0.0048, 2) == 3.0  # six touching neighbours
+    dem = _drum2d()
+    grid = _drum2d_positions(40, spacing=2.6)  # no pairs within the cutoff yet
+    floor = 1.5 * 40 * dense_bed_pairs(dem.particles.radius, dem.neighbor.cutoff, 2)
+    assert dem.init(grid).nbrs.idx.shape[1] == int(np.ceil(floor))
+    packed = _drum2d_positions(40, spacing=1.0)  # closer than contact: more pairs than a bed
+    count = dem.neighbor.count_pairs(jnp.asarray(packed))
+    assert count * 1.5 > floor
+    assert dem.init(packed).nbrs.idx.shape[1] == int(count * 1.5) + 1
+
+
 def test_donated_chunks_run_the_same():
     """run(donate=True) (each chunk donates its start state, which is kept on the host for a
     redo): the same trajectory bit for bit as the plain path on the CPU, through an overflow and

@@ -66,9 +66,9 @@ from drumheat.mechanics.errors import (
     ParticleEscapeError,
 )
 from drumheat.mechanics.forces import ContactForces, Contacts, make_contact_forces
-from drumheat.mechanics.neighbors import (PEC, NeighborSetup, make_displacement,
-                                          make_neighbor_setup, pair_sources, sort_pairs,
-                                          take_pair_data)
+from drumheat.mechanics.neighbors import (PEC, NeighborSetup, dense_bed_pairs,
+                                          make_displacement, make_neighbor_setup, pair_sources,
+                                          sort_pairs, take_pair_data)
 from drumheat.mechanics.precision import PositionResolution, fold_length, position_resolution
 from drumheat.models.soft_sphere import STICKING_CONTACTS, default_time_step
 
@@ -321,9 +321,11 @@ class DEM:
 
         position (N, dim) m; velocity (N, dim) m/s (default 0); angular_velocity (N,) in 2D or
         (N, 3) rad/s (default 0); time (s); extra: user state for ``extra_update``;
-        pair_capacity: minimum neighbour-pair capacity; default ``4 N`` (2D) / ``8 N`` (3D),
-        enough for a dense bed, or 1.5 x the current pairs if more. Overflows are handled by
-        :meth:`run` in any case (reallocation and redo).
+        pair_capacity: minimum neighbour-pair capacity; default the pairs of a dense random bed
+        of these particles within the cutoff (:func:`~drumheat.mechanics.neighbors.
+        dense_bed_pairs`) with the head room of a fresh allocation
+        (``capacity_multiplier``), or that head room on the current pairs if they are more.
+        Overflows are handled by :meth:`run` in any case (reallocation and redo).
         """
         dt_ = self.dtype
         n = self.particles.n
@@ -335,10 +337,13 @@ class DEM:
         wshape = (n,) if self.dim == 2 else (n, 3)
         w = (jnp.zeros(wshape, dt_) if angular_velocity is None
              else jnp.asarray(angular_velocity, dt_).reshape(wshape))
-        # floor: a dense bed has ~3 (2D) / ~6.6 (3D, peers/liggghts/README.md) pairs per
-        # particle within 2r + skin; a dilute start (poured grid) must not size the buffer
+        # floor: the pairs of a dense bed, so that a dilute start (a poured grid) does not size
+        # the buffer for itself; a dense start sizes it from its own pairs (was 4 N in 2D, 8 N
+        # in 3D whatever the skin: 1.7 x the pairs of the built-in drum's poured bed)
         if pair_capacity is None:
-            pair_capacity = (4 if self.dim == 2 else 8) * n
+            nb = self.neighbor
+            pair_capacity = int(math.ceil(nb.capacity_multiplier * n * dense_bed_pairs(
+                self.particles.radius, nb.cutoff, self.dim)))
         nbrs = self.neighbor.allocate(pos, int(pair_capacity), self.cell_capacity)
         cap = nbrs.idx.shape[1]
         n_w = len(self.walls)
