@@ -164,6 +164,32 @@ def test_contact_times_are_whole_steps():
     assert float(count.wall) == walls[heated].sum() * bed.dt
 
 
+def test_step_sums_in_int32_are_exact():
+    # the contact-time sums of the thermal step and of a rebuild's remap run in int32 where
+    # that is exact, so that XLA writes no float64 copy of the per-slot counts (it set the
+    # memory peak of a rebuilding step, docs/performance.md): the same numbers as the float64
+    # sums; beyond the int32 bound the float64 sum; and the remap's count of the dropped pairs
+    # is exact even where each of its two int32 sums wraps around
+    from drumheat.motion.coupling import CoupledHeat, ContactCount, PairTimes, _steps
+
+    counts = jnp.asarray(np.random.default_rng(1).integers(0, 11, 100_000), jnp.int32)
+    exact = float(np.sum(np.asarray(counts, np.int64)))
+    assert float(_steps(counts, 10)) == exact == float(_steps(counts))
+    big = jnp.full(3, 2**30, jnp.int32)  # 3 * 2^30 > 2^31: summed in float64
+    assert float(_steps(big, 2**30)) == 3 * 2.0**30
+    old = PairTimes(jnp.asarray([2**30, 2**30, 2**30, 5], jnp.int32), None)
+    keep = jnp.asarray([0, 1, 2, -1])  # the last pair dropped, a new one in its slot
+
+    def remap(a):
+        return jnp.where(keep >= 0, a[jnp.maximum(keep, 0)], 0)
+
+    zero = jnp.zeros(())
+    new, count, _ = CoupledHeat.remap_pair_arrays(
+        (old, ContactCount(zero, zero), jnp.asarray(3, jnp.int32)), remap)
+    np.testing.assert_array_equal(np.asarray(new.time), [2**30, 2**30, 2**30, 0])
+    assert float(count.pair) == 5.0  # 3 * 2^30 + 5 - 3 * 2^30, both sums past int32
+
+
 def test_padding_slots_of_the_thermal_network_add_nothing():
     # the DEM's contact network keeps the neighbour list's padding index n (dropped by the
     # effects' scatters, clamped by their gathers) rather than pointing the padding at a real

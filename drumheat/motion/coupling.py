@@ -117,7 +117,13 @@ class CoupledHeat(PairCarried):
         reads the same before and after)."""
         pair, count, k = arrays
         new = PairTimes(*(None if a is None else remap(a) for a in pair))
-        dropped = jnp.where(k > 0, _steps(pair.time) - _steps(new.time), 0.0)
+        # the dropped pairs' steps as the difference of two int32 sums: each sum may wrap
+        # around, their difference is exact below 2^31 steps (the dropped pairs lie beyond
+        # the cutoff, so they touched at most a few steps since the last thermal step); summed
+        # in float64 instead, XLA wrote a float64 copy of the counts in every rebuild, at the
+        # run's memory peak (docs/performance.md)
+        steps = lambda t: jnp.sum(t, dtype=jnp.int32)  # noqa: E731
+        dropped = jnp.where(k > 0, (steps(pair.time) - steps(new.time)).astype(jnp.float64), 0.0)
         return new, count._replace(pair=count.pair + dropped), k
 
     def with_pair_arrays(self, arrays) -> "CoupledHeat":
@@ -200,7 +206,7 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     def fold(extra):
         """``extra`` with the contact times since the last thermal step added to the
         recording's (if the run records) and the output interval's accumulators."""
-        extra = extra.replace(count=_count(extra, slot_heated))
+        extra = extra.replace(count=_count(extra, slot_heated, substeps))
         if extra.pair.rec_time is None:
             return extra
         pair = extra.pair._replace(rec_time=extra.pair.rec_time + extra.pair.time)
@@ -322,8 +328,14 @@ def _slot_heated(wall_heated, n):
     return jnp.tile(jnp.asarray(wall_heated, bool), n).astype(jnp.float64)
 
 
-def _steps(counts):
-    """The sum of step counts as a float64 scalar (exact below 2^53 steps)."""
+def _steps(counts, most=None):
+    """The sum of step counts as a float64 scalar (exact below 2^53 steps). ``most``: no count
+    exceeds it; where the counts then cannot sum past int32, they are summed in it (the same
+    number: every partial sum is an integer that float64 holds exactly), so that XLA does not
+    write a float64 copy of them first (at the thermal step of a rebuilding step that copy,
+    8 bytes per pair slot, was part of the run's memory peak: docs/performance.md)."""
+    if most is not None and counts.size * int(most) < 2**31:
+        return jnp.sum(counts, dtype=jnp.int32).astype(jnp.float64)
     return jnp.sum(counts, dtype=jnp.float64)
 
 
@@ -334,16 +346,19 @@ def _since_thermal_step(extra):
     return (jnp.where(fresh, 0, extra.pair.time), jnp.where(fresh, 0, extra.wall_time))
 
 
-def _pending(extra, slot_heated) -> ContactCount:
+def _pending(extra, slot_heated, most=None) -> ContactCount:
     """The contact times since the last thermal step, summed as :class:`ContactCount`
-    (steps)."""
-    pair, wall = _since_thermal_step(extra)
-    return ContactCount(_steps(pair), jnp.sum(wall * slot_heated))
+    (steps); ``most``: the most steps between thermal steps (:func:`_steps`), if known."""
+    fresh = extra.k == 0
+    wall = jnp.where(fresh, 0, extra.wall_time)
+    return ContactCount(jnp.where(fresh, 0.0, _steps(extra.pair.time, most)),
+                        jnp.sum(wall * slot_heated))
 
 
-def _count(extra, slot_heated) -> ContactCount:
+def _count(extra, slot_heated, most=None) -> ContactCount:
     """The count with the contact times since the last thermal step added (steps)."""
-    return ContactCount(*(c + p for c, p in zip(extra.count, _pending(extra, slot_heated))))
+    return ContactCount(*(c + p for c, p in
+                          zip(extra.count, _pending(extra, slot_heated, most))))
 
 
 def recorded_times(extra):

@@ -81,13 +81,18 @@ class ContactNetwork(eqx.Module):
         if blocks <= 1:
             return add(total, self.pair_i, self.pair_j, self.pair_weight)
         size = -(-m // blocks)
+        # the two index rows as one (2, M) array: where they are the rows of a neighbour list
+        # (the coupled DEM's network), XLA takes the list itself instead of writing each row
+        # out as an array of its own for the loop
+        ij = jnp.stack([self.pair_i, self.pair_j])
 
         def block(b, acc):
             start = jnp.minimum(b * size, m - size)
-            cut = lambda a: jax.lax.dynamic_slice_in_dim(a, start, size)  # noqa: E731
+            cut = lambda a: jax.lax.dynamic_slice_in_dim(a, start, size, axis=-1)  # noqa: E731
             own = start + jnp.arange(size) >= b * size
             w = jnp.where(own, cut(self.pair_weight), 0.0)
-            return add(acc, cut(self.pair_i), cut(self.pair_j), w)
+            i, j = cut(ij)
+            return add(acc, i, j, w)
 
         return jax.lax.fori_loop(0, blocks, block, total)
 
