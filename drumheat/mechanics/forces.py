@@ -562,7 +562,8 @@ class CpuContactForces(ContactForces):
                                                                    t - self.dt)[0]
         (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, p_cond,
          pair_rows, wall_rows, rates) = self._kernel.contacts(
-            self.pair_positions(pos), vel, w, *self._kernel_particles, nbrs.idx, pair_spring, wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
+            self.pair_positions(pos), vel, w, *self._kernel_particles, nbrs.idx, pair_spring,
+            wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
             pair_gap=self.gap_pp, order=nbrs.order, details=details)
         active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)

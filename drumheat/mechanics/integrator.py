@@ -321,8 +321,8 @@ class DEM:
 
         position (N, dim) m; velocity (N, dim) m/s (default 0); angular_velocity (N,) in 2D or
         (N, 3) rad/s (default 0); time (s); extra: user state for ``extra_update``;
-        pair_capacity: minimum neighbour-pair capacity; default the pairs of a dense random bed
-        of these particles within the cutoff (:func:`~drumheat.mechanics.neighbors.
+        pair_capacity: minimum neighbour-pair capacity; default the pairs of a dense bed of
+        these particles within the cutoff (:func:`~drumheat.mechanics.neighbors.
         dense_bed_pairs`) with the head room of a fresh allocation
         (``capacity_multiplier``), or that head room on the current pairs if they are more.
         Overflows are handled by :meth:`run` in any case (reallocation and redo).
@@ -681,13 +681,14 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
         the trajectory, are those of :func:`step`.
         """
-        # The loop carries each step's state with its last half-kick pending (`pend`):
-        # velocities and spins at the half step, which the next step kicks twice (the last
-        # half-kick of its predecessor, then its own first one) before its drift, and the
-        # loop's end once. The same additions in the same order as `step`'s, so the same
-        # numbers; but the full-step velocities, which nothing in the loop reads, are no longer
-        # written every step (two passes over (N, 3) less). `pend` is 0 for the chunk's start
-        # state, whose velocities are full-step (adding 0 x the kick leaves them as they are).
+        # The loop carries each step's state with its last half-kick pending: velocities and
+        # spins at the half step, which the next step kicks twice (the last half-kick of its
+        # predecessor, then its own first one) before its drift, and the loop's end once. The
+        # same additions in the same order as `step`'s, so the same numbers; but the full-step
+        # velocities, which nothing in the loop reads, are no longer written every step (two
+        # passes over (N, 3) less). The carry's `aux` says whether a half-kick is pending: 0
+        # for the chunk's start state, whose velocities are full-step (adding 0 x the kick
+        # leaves them as they are), 1 after a step.
         # A `boundary_update` may change the full-step velocities: then the carry holds the
         # coming step's half-kick instead, computed once from them.
         # The coming step's positions are computed twice (the same values), in the loop

@@ -532,7 +532,7 @@ def dense_bed_pairs(radius, cutoff: float, dim: int) -> float:
     others. In 2D at least 3, the first shell of the hexagonal packing (six neighbours at
     contact), which this mean count misses at a thin skin. In 3D beds of spheres stay random:
     the built-in drum (d = 8 mm, skin 2 mm, conduction gap 0.08 mm: c = 10.08 mm) gives 4.62,
-    and its poured bed lists 4.63 pairs per particle (docs/performance.md).
+    and its poured bed lists 4.63 pairs per particle at N = 20 000 (docs/performance.md).
     """
     r = np.asarray(radius, float).reshape(-1)
     mean = 0.5 * (DENSE_FRACTION[dim] * float(cutoff) ** dim / float(np.mean(r**dim)) - 1.0)

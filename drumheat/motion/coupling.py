@@ -118,8 +118,9 @@ class CoupledHeat(PairCarried):
         pair, count, k = arrays
         new = PairTimes(*(None if a is None else remap(a) for a in pair))
         # the dropped pairs' steps as the difference of two int32 sums: each sum may wrap
-        # around, their difference is exact below 2^31 steps (the dropped pairs lie beyond
-        # the cutoff, so they touched at most a few steps since the last thermal step); summed
+        # around, their difference is exact while the dropped pairs' steps sum to less than
+        # 2^31 (they lie beyond the cutoff, so they touched at most a few of the steps since
+        # the last thermal step); summed
         # in float64 instead, XLA wrote a float64 copy of the counts in every rebuild, at the
         # run's memory peak (docs/performance.md)
         steps = lambda t: jnp.sum(t, dtype=jnp.int32)  # noqa: E731
