@@ -261,13 +261,20 @@ def test_2d_drum_turns_stably_and_lifts_the_bed(settled_2d):
     assert dem.energies(s)["kinetic"] > 0
 
 
-def test_3d_periodic_drum_turns_stably():
+def _drum3d(n):
+    """``(dem, sites, r, R, L)``: n spheres of r = 2 mm on a grid in a periodic slice (L = 16 mm)
+    of a 50 mm drum turning at 60 rpm."""
     R, r, L = 0.025, 0.002, 0.016
     sites = insertion_sites([DrumShell(R)], 3, 2.2 * r, 1.05 * r, periodic_length=L)
-    sites = sites[np.argsort(sites[:, 1], kind="stable")][:100]
+    sites = sites[np.argsort(sites[:, 1], kind="stable")][:n]
     part = make_particles(np.full(len(sites), r), 2500.0)
     p = contact_params(2e4, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
     dem = make_dem(part, [DrumShell(R, rpm=60.0)], p, dim=3, periodic_length=L)
+    return dem, sites, r, R, L
+
+
+def test_3d_periodic_drum_turns_stably():
+    dem, sites, r, R, L = _drum3d(100)
     s = dem.run(dem.init(sites), int(2.0 / dem.dt), chunk=50000)  # 2 revolutions
     pos = np.asarray(s.position)
     assert np.all((pos[:, 2] >= 0) & (pos[:, 2] < L))
@@ -280,12 +287,7 @@ def test_run_steps_equal_the_step_one_by_one():
     """``run_steps`` (runs of steps between rebuilds, each step's last half-kick carried to the
     next step) gives the states of :meth:`DEM.step` called step by step, bit for bit: 3D, spins,
     neighbour rebuilds on the way; and a run of no steps leaves the state as it is."""
-    R, r, L = 0.025, 0.002, 0.016
-    sites = insertion_sites([DrumShell(R)], 3, 2.2 * r, 1.05 * r, periodic_length=L)
-    sites = sites[np.argsort(sites[:, 1], kind="stable")][:60]
-    part = make_particles(np.full(len(sites), r), 2500.0)
-    p = contact_params(2e4, damping_ratio=0.3, friction=0.9, wall_friction=0.6)
-    dem = make_dem(part, [DrumShell(R, rpm=60.0)], p, dim=3, periodic_length=L)
+    dem, sites = _drum3d(60)[:2]
     s0 = dem.run(dem.init(sites), 3000)  # falling onto the turning shell
     n = 400
     a = dem.run_steps(s0, n)
