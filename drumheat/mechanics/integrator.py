@@ -338,8 +338,7 @@ class DEM:
         w = (jnp.zeros(wshape, dt_) if angular_velocity is None
              else jnp.asarray(angular_velocity, dt_).reshape(wshape))
         # floor: the pairs of a dense bed, so that a dilute start (a poured grid) does not size
-        # the buffer for itself; a dense start sizes it from its own pairs (was 4 N in 2D, 8 N
-        # in 3D whatever the skin: 1.7 x the pairs of the built-in drum's poured bed)
+        # the buffer for itself; a dense start sizes it from its own pairs
         if pair_capacity is None:
             nb = self.neighbor
             pair_capacity = int(math.ceil(nb.capacity_multiplier * n * dense_bed_pairs(
@@ -691,9 +690,9 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         # leaves them as they are), 1 after a step.
         # A `boundary_update` may change the full-step velocities: then the carry holds the
         # coming step's half-kick instead, computed once from them.
-        # The coming step's positions are computed twice (the same values), in the loop
-        # condition, which tests them against the skin, and in the step: carried, they made
-        # XLA copy them every step (from the carry's drift into the state).
+        # The coming step's kick and positions are computed twice (the same values), in the
+        # loop condition, which tests them against the skin, and in the step: carried, they
+        # made XLA copy them every step (from the carry's drift into the state).
         pending = boundary_update is None
 
         def kicked(st, aux):

@@ -530,9 +530,9 @@ def dense_bed_pairs(radius, cutoff: float, dim: int) -> float:
     ``phi / <V_p>``; a particle then has ``phi c^3 / <r^3>`` centres within c in 3D
     (``phi c^2 / <r^2>`` in 2D), itself included; the pairs per particle are half of the
     others. In 2D at least 3, the first shell of the hexagonal packing (six neighbours at
-    contact), which this mean count misses at a thin skin. In 3D beds of spheres stay random:
-    the built-in drum (d = 8 mm, skin 2 mm, conduction gap 0.08 mm: c = 10.08 mm) gives 4.62,
-    and its poured bed lists 4.63 pairs per particle at N = 20 000 (docs/performance.md).
+    contact), which this mean count misses at a thin skin. In 3D beds of spheres stay random
+    (the estimate against a poured bed: docs/performance.md, the pair capacity of a dense
+    bed).
     """
     r = np.asarray(radius, float).reshape(-1)
     mean = 0.5 * (DENSE_FRACTION[dim] * float(cutoff) ** dim / float(np.mean(r**dim)) - 1.0)

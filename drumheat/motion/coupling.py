@@ -350,10 +350,11 @@ def _since_thermal_step(extra):
 def _pending(extra, slot_heated, most=None) -> ContactCount:
     """The contact times since the last thermal step, summed as :class:`ContactCount`
     (steps); ``most``: the most steps between thermal steps (:func:`_steps`), if known."""
-    fresh = extra.k == 0
-    wall = jnp.where(fresh, 0, extra.wall_time)
-    return ContactCount(jnp.where(fresh, 0.0, _steps(extra.pair.time, most)),
-                        jnp.sum(wall * slot_heated))
+    # the pairs' times summed before the reset of a fresh state is applied (the same sum):
+    # the reset's int32 copy of every slot is not written
+    _, wall = _since_thermal_step(extra)
+    pair = jnp.where(extra.k == 0, 0.0, _steps(extra.pair.time, most))
+    return ContactCount(pair, jnp.sum(wall * slot_heated))
 
 
 def _count(extra, slot_heated, most=None) -> ContactCount:
