@@ -526,8 +526,11 @@ DRUMHEAT_VECTOR_CLONES void within_reach(const int32_t* __restrict pi, const int
   }
 }
 
-// Per-chunk accumulators (forces and torques in S, then N doubles of heat) that live across
-// calls (no allocation and page faults every step).
+// Work buffers (the records, the layout, the per-chunk accumulators) that live across calls
+// (no allocation and page faults every step). A call takes the smallest free buffer that holds
+// what it asks for (else the largest, grown), so that each of a call's buffers gets the one of
+// its own size back in the next call (taking the last one given back, the buffers changed roles
+// between calls and each grew to the largest size asked for).
 using Buffer = std::vector<double>;
 std::mutex g_buf_mu;
 std::vector<std::unique_ptr<Buffer>> g_bufs;
@@ -536,7 +539,15 @@ std::unique_ptr<Buffer> take_buffer(size_t size) {
   std::unique_ptr<Buffer> b;
   {
     std::lock_guard<std::mutex> lock(g_buf_mu);
-    if (!g_bufs.empty()) { b = std::move(g_bufs.back()); g_bufs.pop_back(); }
+    // the smallest buffer that holds `size`, else the largest
+    using Held = std::unique_ptr<Buffer>;
+    const auto before = [size](const Held& a, const Held& c) {
+      const bool fa = a->size() >= size, fc = c->size() >= size;
+      if (fa != fc) return fa;
+      return fa ? a->size() < c->size() : a->size() > c->size();
+    };
+    const auto it = std::min_element(g_bufs.begin(), g_bufs.end(), before);
+    if (it != g_bufs.end()) { b = std::move(*it); g_bufs.erase(it); }
   }
   if (!b) b = std::make_unique<Buffer>();
   if (b->size() < size) b->resize(size);
