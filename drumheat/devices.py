@@ -1,11 +1,24 @@
-"""Fetching (possibly sharded) device arrays to the host, in one process or several."""
+"""Fetching (possibly sharded) device arrays to the host, in one process or several; the
+lengths of arrays that suit the devices' loops."""
 
 from __future__ import annotations
 
 import jax
 import numpy as np
 
-__all__ = ["to_host"]
+__all__ = ["to_host", "LENGTH_MULTIPLE", "round_length"]
+
+#: the lengths that drumheat chooses itself for arrays that a step loops over (the pair slots of
+#: a neighbour list, the blocks of the thermal pair sum) are whole multiples of this. XLA:CPU
+#: cuts a long element-wise loop into equal parts for its threads; where the parts did not
+#: divide the length evenly, the loop it compiled ran several times slower
+#: (scripts/bench_xla_partitions.py; docs/performance.md, lengths that XLA:CPU cuts evenly)
+LENGTH_MULTIPLE = 64
+
+
+def round_length(k: int) -> int:
+    """``k`` rounded up to a whole multiple of :data:`LENGTH_MULTIPLE`."""
+    return -(-int(k) // LENGTH_MULTIPLE) * LENGTH_MULTIPLE
 
 
 def to_host(tree):

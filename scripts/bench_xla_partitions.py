@@ -7,13 +7,13 @@ divide evenly and at lengths one or a few elements off:
 
 * the contact-time counts of the pair slots (``motion.coupling``: ``where(fresh, 0, time) +
   conducts`` over (M,) int32), at the built-in drum's slot counts at N = 10 000 and 50 000 of
-  before and after ``neighbors.PAIR_SLOT_MULTIPLE`` (69 315 / 69 376 and 346 573 / 346 624);
+  before and after ``drumheat.devices.LENGTH_MULTIPLE`` (69 315 / 69 376 and 346 573 / 346 624);
 * an update of (N, 3) float64 like a kick (``a x + b i``) at N = 30 000 and 30 001.
 
 Each loop runs 1000 times inside one compiled ``fori_loop``; printed: the number of parts the
 compiled loop has (1: not cut), the best of ``--repeat`` calls in microseconds per loop, and
 the machine's load and CPU steal during the timing (``scripts/machine.py``). Numbers and their
-reading: docs/performance.md (the pair capacity's multiple).
+reading: docs/performance.md (lengths that XLA:CPU cuts evenly).
 
 Usage: python scripts/bench_xla_partitions.py [--repeat 9]
 """

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from drumheat.devices import LENGTH_MULTIPLE, round_length
 from drumheat.geometry import DrumShell
 from drumheat.mechanics import (
     NonFiniteError,
@@ -18,7 +19,6 @@ from drumheat.mechanics import (
     make_particles,
 )
 from drumheat.mechanics.analysis import angle_of_repose, center_of_mass
-from drumheat.mechanics.neighbors import PAIR_SLOT_MULTIPLE
 from drumheat.mechanics.pour import insertion_sites
 
 R2D, RP = 0.025, 0.002
@@ -91,11 +91,11 @@ def test_neighbour_overflow_is_reallocated_and_redone():
     grid = _drum2d_positions(40, spacing=2.6)  # 5.2 mm apart: beyond the 5 mm cutoff
     tiny = dem.init(grid, pair_capacity=1)  # one multiple of the slots: fewer than the bed's pairs
     big = dem.init(grid)
-    assert tiny.nbrs.idx.shape[1] == PAIR_SLOT_MULTIPLE and big.nbrs.idx.shape[1] >= 160
+    assert tiny.nbrs.idx.shape[1] == LENGTH_MULTIPLE and big.nbrs.idx.shape[1] >= 160
     n = int(0.2 / dem.dt)
     out = dem.run(tiny, n, chunk=n // 2)
     ref = dem.run(big, n, chunk=n // 2)
-    assert out.nbrs.idx.shape[1] > PAIR_SLOT_MULTIPLE
+    assert out.nbrs.idx.shape[1] > LENGTH_MULTIPLE
     assert not bool(out.nbrs.did_buffer_overflow)
     assert int(out.step) == n
     assert int(dem.contacts(out).pair_mask.sum()) > 30  # the settled bed has many contacts
@@ -110,7 +110,7 @@ def test_default_capacity_is_that_of_a_dense_bed():
     """A dilute start gets the pair capacity of a dense bed of its particles (the mean count of
     neighbours at random close packing in 3D, at least the hexagonal first shell in 2D) with
     the allocation's head room; a start with more pairs sizes the list from its own. The slots
-    come in whole multiples of PAIR_SLOT_MULTIPLE."""
+    come in whole multiples of drumheat.devices.LENGTH_MULTIPLE."""
     from drumheat.mechanics.neighbors import DENSE_FRACTION, dense_bed_pairs
 
     r = np.full(5, 0.004)
@@ -124,14 +124,11 @@ def test_default_capacity_is_that_of_a_dense_bed():
     dem = _drum2d()
     grid = _drum2d_positions(40, spacing=2.6)  # no pairs within the cutoff yet
     floor = 1.5 * 40 * dense_bed_pairs(dem.particles.radius, dem.neighbor.cutoff, 2)
-    def slots(k):
-        return -(-k // PAIR_SLOT_MULTIPLE) * PAIR_SLOT_MULTIPLE
-
-    assert dem.init(grid).nbrs.idx.shape[1] == slots(int(np.ceil(floor)))
+    assert dem.init(grid).nbrs.idx.shape[1] == round_length(int(np.ceil(floor)))
     packed = _drum2d_positions(40, spacing=1.0)  # closer than contact: more pairs than a bed
     count = dem.neighbor.count_pairs(jnp.asarray(packed))
     assert count * 1.5 > floor
-    assert dem.init(packed).nbrs.idx.shape[1] == slots(int(count * 1.5) + 1)
+    assert dem.init(packed).nbrs.idx.shape[1] == round_length(int(count * 1.5) + 1)
 
 
 def test_donated_chunks_run_the_same():

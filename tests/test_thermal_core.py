@@ -152,7 +152,9 @@ def test_pair_sum_in_blocks_counts_every_slot_once(monkeypatch):
     np.add.at(ref_q, j, -q)
     np.add.at(ref_g, i, 2.5 * w)
     np.add.at(ref_g, j, 2.5 * w)
-    for block in (1 << 16, 16):  # one pass; 8 blocks of 26 slots, the last one shifted
+    # one pass; 4 blocks of 64 slots (8 of 26 rounded up to the lengths' multiple), the last one
+    # shifted back to end at the last slot
+    for block in (1 << 16, 16):
         monkeypatch.setattr(network, "PAIR_BLOCK", block)
         got = net.pair_sum(flow, jnp.zeros(n))
         np.testing.assert_allclose(got, ref_q[:n], rtol=0, atol=1e-12 * np.abs(q).max())

@@ -58,6 +58,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.devices import round_length
+
 __all__ = [
     "NeighborList",
     "ListError",
@@ -198,11 +200,6 @@ def sort_pairs(nbrs, n, order=None):
 #: data cache
 NEAR = 256
 
-#: pair slots are allocated in whole multiples of this. XLA:CPU cuts a long loop over the pair
-#: slots (the contact-time counts, the springs' updates, the thermal step's gathers) into equal
-#: parts for its threads; where the parts do not divide the slots evenly, it compiled the loop
-#: into one that ran several times slower (docs/performance.md, the pair capacity's multiple)
-PAIR_SLOT_MULTIPLE = 64
 
 
 class PEC:
@@ -473,8 +470,8 @@ class NeighborSetup:
         """Allocate a neighbour list at ``position`` (not jittable: it sizes the buffers).
 
         The pair capacity is ``capacity_multiplier`` times the current number of pairs, and at
-        least ``min_capacity`` (and at least 1), rounded up to a multiple of
-        :data:`PAIR_SLOT_MULTIPLE`; the cell capacity ``capacity_multiplier`` x the fullest cell,
+        least ``min_capacity`` (and at least 1), rounded up to a whole multiple of
+        :data:`drumheat.devices.LENGTH_MULTIPLE`; the cell capacity ``capacity_multiplier`` x the fullest cell,
         and at least ``min_cell_capacity``.
         """
         pos = self.to_box(position)
@@ -482,7 +479,7 @@ class NeighborSetup:
         cell_cap = max(int(min_cell_capacity), int(fullest * self.capacity_multiplier), 1)
         count, _ = _count_pairs(self.grid, pos, cell_cap)
         target = max(int(min_capacity), int(int(count) * self.capacity_multiplier) + 1, 1)
-        target = -(-target // PAIR_SLOT_MULTIPLE) * PAIR_SLOT_MULTIPLE
+        target = round_length(target)
         return self._list(pos, _build(self.grid, pos, target, cell_cap),
                           ListError(jnp.zeros((), jnp.uint8)), cell_cap)
 

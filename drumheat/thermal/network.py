@@ -17,6 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from drumheat.devices import round_length
+
 #: :meth:`ContactNetwork.pair_sum` takes the pair slots in blocks of at least this many
 PAIR_BLOCK = 1 << 16
 #: ... and in at most this many blocks
@@ -64,7 +66,8 @@ class ContactNetwork(eqx.Module):
         ``fn`` maps the slots' indices and weights (arrays of one block of slots) to their
         values, and must give 0 where ``w = 0`` (as every unused slot does). Beyond
         :data:`PAIR_BLOCK` slots the slots go in up to :data:`PAIR_BLOCKS_MAX` blocks of equal
-        length, one after the other, so that the per-slot temporaries of ``fn`` (the gathers of
+        length (a whole multiple of :data:`drumheat.devices.LENGTH_MULTIPLE`), one after the
+        other, so that the per-slot temporaries of ``fn`` (the gathers of
         both partners' temperatures and sizes) exist for one block at a time instead of for
         every slot at once: in a coupled DEM run they set the peak of XLA's working memory
         (docs/performance.md, memory). The last block is shifted back to end at the last slot;
@@ -80,7 +83,8 @@ class ContactNetwork(eqx.Module):
         blocks = min(PAIR_BLOCKS_MAX, -(-m // PAIR_BLOCK))
         if blocks <= 1:
             return add(total, self.pair_i, self.pair_j, self.pair_weight)
-        size = -(-m // blocks)
+        size = min(round_length(-(-m // blocks)), m)
+        blocks = -(-m // size)
         # the two index rows as one (2, M) array: where they are the rows of a neighbour list
         # (the coupled DEM's network), XLA takes the list itself instead of writing each row
         # out as an array of its own for the loop
