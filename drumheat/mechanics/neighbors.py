@@ -201,7 +201,6 @@ def sort_pairs(nbrs, n, order=None):
 NEAR = 256
 
 
-
 class PEC:
     """Overflow bits of :attr:`NeighborList.error` (the bits of ``jax_md.partition.PEC``)."""
 
@@ -471,8 +470,8 @@ class NeighborSetup:
 
         The pair capacity is ``capacity_multiplier`` times the current number of pairs, and at
         least ``min_capacity`` (and at least 1), rounded up to a whole multiple of
-        :data:`drumheat.devices.LENGTH_MULTIPLE`; the cell capacity ``capacity_multiplier`` x the fullest cell,
-        and at least ``min_cell_capacity``.
+        :data:`drumheat.devices.LENGTH_MULTIPLE`; the cell capacity ``capacity_multiplier``
+        x the fullest cell, and at least ``min_cell_capacity``.
         """
         pos = self.to_box(position)
         fullest = int(_fullest_cell(self.grid, pos))
