@@ -16,9 +16,9 @@ __all__ = ["to_host", "LENGTH_MULTIPLE", "round_length"]
 LENGTH_MULTIPLE = 64
 
 
-def round_length(k: int) -> int:
-    """``k`` rounded up to a whole multiple of :data:`LENGTH_MULTIPLE`."""
-    return -(-int(k) // LENGTH_MULTIPLE) * LENGTH_MULTIPLE
+def round_length(k: int, multiple: int = LENGTH_MULTIPLE) -> int:
+    """``k`` rounded up to a whole multiple of ``multiple`` (:data:`LENGTH_MULTIPLE`)."""
+    return -(-int(k) // int(multiple)) * int(multiple)
 
 
 def to_host(tree):

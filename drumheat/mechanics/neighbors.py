@@ -477,8 +477,8 @@ class NeighborSetup:
         fullest = int(_fullest_cell(self.grid, pos))
         cell_cap = max(int(min_cell_capacity), int(fullest * self.capacity_multiplier), 1)
         count, _ = _count_pairs(self.grid, pos, cell_cap)
-        target = max(int(min_capacity), int(int(count) * self.capacity_multiplier) + 1, 1)
-        target = round_length(target)
+        target = round_length(
+            max(int(min_capacity), int(int(count) * self.capacity_multiplier) + 1, 1))
         return self._list(pos, _build(self.grid, pos, target, cell_cap),
                           ListError(jnp.zeros((), jnp.uint8)), cell_cap)
 

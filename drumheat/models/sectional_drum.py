@@ -47,6 +47,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.devices import round_length
+
 __all__ = [
     "ContactLengths",
     "RegionBoundary",
@@ -284,7 +286,7 @@ def _section_vmapped(delta, *params):
     traced = any(isinstance(v, jax.core.Tracer) for v in (delta, *params))
     xp = jnp if traced else np
     n = delta.shape[0]
-    m = -(-max(n, 1) // _CHUNK) * _CHUNK
+    m = round_length(max(n, 1), _CHUNK)
     padded = xp.concatenate([delta, xp.zeros(m - n, delta.dtype)]) if m > n else delta
     parts = [_section_vmapped_jit(padded[i:i + _CHUNK], *params) for i in range(0, m, _CHUNK)]
     if not traced:

@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from drumheat.devices import round_length
 from drumheat.devices import to_host  # noqa: F401 (re-exported)
 
 AXIS = "d"
@@ -86,7 +87,7 @@ def make_mesh(devices=None) -> Mesh:
 def pad_to_multiple(tree, n: int, multiple: int):
     """Pad the leading axis (length ``n``) of every array in ``tree`` to a multiple of
     ``multiple`` by repeating the last entry. Returns ``(padded_tree, n_padded)``."""
-    n_pad = -(-n // multiple) * multiple
+    n_pad = round_length(n, multiple)
     if n_pad == n:
         return tree, n
 

@@ -67,9 +67,9 @@ class ContactNetwork(eqx.Module):
         values, and must give 0 where ``w = 0`` (as every unused slot does). Beyond
         :data:`PAIR_BLOCK` slots the slots go in up to :data:`PAIR_BLOCKS_MAX` blocks of equal
         length (a whole multiple of :data:`drumheat.devices.LENGTH_MULTIPLE`), one after the
-        other, so that the per-slot temporaries of ``fn`` (the gathers of
-        both partners' temperatures and sizes) exist for one block at a time instead of for
-        every slot at once: in a coupled DEM run they set the peak of XLA's working memory
+        other, so that the per-slot temporaries of ``fn`` (the gathers of both partners'
+        temperatures and sizes) exist for one block at a time instead of for every slot at
+        once: in a coupled DEM run they set the peak of XLA's working memory
         (docs/performance.md, memory). The last block is shifted back to end at the last slot;
         the slots it shares with the block before it count there only (weight 0 here). The
         terms of a particle's sum are added block by block, so the sums differ from those of
