@@ -107,6 +107,7 @@ def test_resting_dem_bed_matches_the_static_model(gap):
                                rtol=0, atol=1e-12)
 
 
+@pytest.mark.bitwise
 def test_a_run_that_records_nothing_carries_no_recording_accumulators():
     # without dem.record_interval the coupled state leaves the recording's per-pair and
     # per-wall-slot accumulators out (one int32 per slot less to carry, remap and fold);
@@ -252,6 +253,7 @@ def test_cyclic_replay_and_interfraction_contacts(tmp_path):
     assert np.all(np.diff(ts["T_mean:cold"]) > 0) and np.all(np.diff(ts["T_mean:warm"]) < 0)
 
 
+@pytest.mark.bitwise
 def test_replay_after_continues_the_coupled_run_cyclically():
     scene = dem_scene(**{"run.duration": 0.6, "run.output_interval": 0.1,
                          "dem.record_interval": 0.01, "dem.replay_after": 0.2})

@@ -44,6 +44,7 @@ def settled_2d():
     return dem, s
 
 
+@pytest.mark.bitwise
 def test_tangential_history_survives_neighbour_rebuilds(settled_2d):
     """Same trajectory with the normal skin (rare rebuilds) and a rebuild every step."""
     dem, s0 = settled_2d
@@ -83,6 +84,7 @@ def test_forgetting_history_would_change_the_trajectory(settled_2d):
     assert np.max(np.abs(np.asarray(a.position) - np.asarray(b.position))) > 1e-8
 
 
+@pytest.mark.bitwise
 def test_neighbour_overflow_is_reallocated_and_redone():
     """A list allocated for a dilute start (a poured grid: no pairs yet) overflows as the bed
     falls together; run() discards the chunk, reallocates and redoes it, and the result is the
@@ -131,6 +133,7 @@ def test_default_capacity_is_that_of_a_dense_bed():
     assert dem.init(packed).nbrs.idx.shape[1] == round_length(int(count * 1.5) + 1)
 
 
+@pytest.mark.bitwise
 def test_donated_chunks_run_the_same():
     """run(donate=True) (each chunk donates its start state, which is kept on the host for a
     redo): the same trajectory bit for bit as the plain path on the CPU, through an overflow and
