@@ -4,8 +4,9 @@
 #   2. scripts/bench_gpu.py: glass-drum-3d through the product path at N = 1e5 and 1e6, float64,
 #      mixed and float32 mechanics: particle-steps/s and peak device memory per particle;
 #   3. the tests of the newer heat features (coupled contact times, friction heat, drum wall,
-#      coarse-graining) on the GPU: the same code must give the same physics there (the suite
-#      itself never needs one).
+#      coarse-graining) and of the DEM's run loop on the GPU: the same code must give the same
+#      physics there (the suite itself never needs one; the tests that compare two runs bit
+#      for bit, marked bitwise, are skipped there: a GPU adds in no fixed order).
 # Environment knobs: PRECISIONS (default "float64 mixed float32"), NS ("100000 1000000"), TRACE
 # (steps of a profiler trace after each timing, 0 = none; the trace files go to $OUT, the
 # per-kernel lines to bench_gpu.log only), TESTS (the test files), TEST_SECONDS (their limit).
@@ -28,7 +29,7 @@ else
 fi
 nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.sm,clocks.mem --format=csv
 python3 -c "import jax; print('jax', jax.__version__, jax.devices())"
-TESTS=${TESTS:-tests/test_coupled.py tests/test_friction_heat.py tests/test_drum_wall.py tests/test_coarse_grain.py}
+TESTS=${TESTS:-tests/test_coupled.py tests/test_friction_heat.py tests/test_drum_wall.py tests/test_coarse_grain.py tests/test_mechanics_runner.py}
 # shellcheck disable=SC2086  # word splitting of the lists is meant
 timeout 330 python3 scripts/bench_gpu.py --n ${NS:-100000 1000000} \
   --precision ${PRECISIONS:-float64 mixed float32} --seconds "$SECONDS_PER_CASE" --warm 200 \
