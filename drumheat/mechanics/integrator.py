@@ -386,6 +386,18 @@ class DEM:
         """``n_steps`` steps in one jitted loop (``lax.fori_loop``), without host-side checks."""
         return self._run_steps(self.adopt(state), jnp.asarray(int(n_steps), jnp.int32))
 
+    def run_steps_in_place(self, state: DEMState, n_steps: int) -> DEMState:
+        """:meth:`run_steps` reusing the buffers of ``state`` for the result (buffer donation:
+        one copy of the state in memory instead of two); ``state`` is unusable afterwards."""
+        return self._run_chunk(self.adopt(state), jnp.asarray(int(n_steps), jnp.int32))
+
+    def passes(self, new: DEMState) -> bool:
+        """Whether :meth:`check_chunk` accepts the chunk that ended in ``new`` (no buffer
+        overflowed, and it passes the NaN, escape and overlap checks); it needs no start
+        state."""
+        d = jax.device_get(self._diag(new))
+        return not d["overflow"] and self._passes(d)
+
     def adopt(self, state: DEMState) -> DEMState:
         """``state`` with its neighbour list in this DEM's pair order (jittable): a state made
         by a DEM of the other contact kernel (whose lists are in the other order, see
@@ -476,8 +488,7 @@ class DEM:
         device = jax.tree_util.tree_leaves(start)[0].sharding
         held = jax.device_put(start, jax.devices("cpu")[0], may_alias=False)
         new = self._run_chunk(start, n)
-        d = jax.device_get(self._diag(new))
-        if not d["overflow"] and self._passes(d):
+        if self.passes(new):
             return new, None
         return new, jax.device_put(held, device)
 

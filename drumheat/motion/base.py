@@ -100,6 +100,23 @@ class AbstractMotion(abc.ABC):
         with larger neighbour buffers); an exception stops the run."""
         return None
 
+    def advances_in_place(self, state) -> bool:
+        """Whether :meth:`advance_in_place` reuses the buffers of ``state`` for the result
+        (then ``state`` is unusable after it, and the run keeps the start elsewhere:
+        :class:`drumheat.runner.spill.StartSpill`). Default: no."""
+        return False
+
+    def advance_in_place(self, state, t0: float, t1: float):
+        """:meth:`advance`, free to reuse the buffers of ``state`` for the result (buffer
+        donation: a chunk then holds one state in memory instead of two) where
+        :meth:`advances_in_place` says so. Default: :meth:`advance`."""
+        return self.advance(state, t0, t1)
+
+    def passes(self, end) -> bool:
+        """Whether :meth:`check` accepts ``end`` as it is (no redo, no error), told without
+        the start state (which an in-place chunk no longer has in memory). Default: yes."""
+        return True
+
     def start_log(self, state, params: dict | None = None, spool=None) -> Any:
         """Host-side record a run keeps between chunks (e.g. the contact recording); it may
         keep the run's ``params`` for :meth:`finish`. ``spool``: a folder where the log may

@@ -37,7 +37,7 @@ import numpy as np
 
 from drumheat import assemble
 from drumheat.devices import to_host
-from drumheat.mechanics import DEMError, make_dem
+from drumheat.mechanics import DEMError, DEMState, make_dem
 from drumheat.mechanics.analysis import count_interfraction_contacts
 from drumheat.mechanics.dissipation import SOURCES
 from drumheat.mechanics.integrator import JIT_OPTIONS
@@ -333,6 +333,15 @@ class DEMBed(DEMMotion):
                                  self._steps(t0, t1, rec.tau))
             return dict(state, T=T, Q=Q, g=g)
         return self.dem.run_steps(self._start(state, t0), self._steps(t0, t1, self.dt))
+
+    def advances_in_place(self, state) -> bool:
+        # the coupled DEM's chunks (not the replay's, whose state is host data)
+        return isinstance(state, DEMState)
+
+    def advance_in_place(self, state, t0, t1):
+        if not self.advances_in_place(state):
+            return self.advance(state, t0, t1)
+        return self.dem.run_steps_in_place(self._start(state, t0), self._steps(t0, t1, self.dt))
 
     def start_log(self, state, params=None, spool=None):
         rec = None

@@ -105,6 +105,10 @@ class DEMMotion(AbstractMotion):
         except DEMError as err:
             raise type(err)(f"{err} (scene {self.scene.name!r})", err.state) from None
 
+    def passes(self, end) -> bool:
+        """:meth:`drumheat.mechanics.DEM.passes` for a DEM state (any other: yes)."""
+        return not isinstance(end, DEMState) or self.dem.passes(end)
+
     def checkpoint_meta(self, state) -> dict:
         if not isinstance(state, DEMState):
             return {}

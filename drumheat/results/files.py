@@ -328,7 +328,8 @@ class RunFolder:
     ``t``, ``T_mean``, ``T_mean:<group>``, ``T_min``, ``T_max`` and the heat accounts), the
     latest ``checkpoint.npz``, the particle frames so far in ``.frames/`` (one ``.npy`` per
     frame and quantity: a long run never holds all its frames in memory), the contact
-    recording so far in ``.log/`` (one file per recorded quantity) and a lock (a second
+    recording so far in ``.log/`` (one file per recorded quantity; on the CPU also the start of
+    the running chunk, :class:`drumheat.runner.spill.StartSpill`) and a lock (a second
     run into the same folder is refused). When the run completes, the complete result replaces
     all of it (:func:`write_results`). A run that stops early (Ctrl-C, an error) leaves what it
     has, marks the summary incomplete and keeps the checkpoint, from which ``drumheat run ...

@@ -33,6 +33,7 @@ from drumheat.runner.checkpoint import CheckpointError, load_checkpoint, save_ch
 from drumheat.runner.compile_cache import enable_compilation_cache
 from drumheat.runner.progress import SimProgress
 from drumheat.runner.sharding import make_mesh, resolve_devices, shard_particles
+from drumheat.runner.spill import StartSpill
 from drumheat.scene import Scene, SceneError, load_scene
 
 __all__ = ["run", "simulate", "trace", "restore", "estimate", "advance_checked", "MAX_REDO",
@@ -42,11 +43,28 @@ __all__ = ["run", "simulate", "trace", "restore", "estimate", "advance_checked",
 MAX_REDO = 9
 
 
-def advance_checked(motion: AbstractMotion, state, t0: float, t1: float):
+def advance_checked(motion: AbstractMotion, state, t0: float, t1: float,
+                    spill: StartSpill | None = None):
     """One chunk of a run: ``motion.advance``, redone from the start state that
-    ``motion.check`` hands back (at most :data:`MAX_REDO` times)."""
-    start = state
-    for attempt in range(MAX_REDO):
+    ``motion.check`` hands back (at most :data:`MAX_REDO` times).
+
+    With ``spill`` (which holds ``state``, :meth:`StartSpill.save`) and a motion model that
+    advances ``state`` in place, the first attempt runs in place; the start is read back from
+    the spill only if the chunk fails :meth:`AbstractMotion.passes`, and any redo runs as
+    usual."""
+    start, first = state, 0
+    if spill is not None and motion.advances_in_place(state):
+        end = motion.advance_in_place(state, t0, t1)
+        del state, start  # donated
+        if motion.passes(end):
+            spill.adopt(end)
+            return end
+        start = spill.load()
+        redo = motion.check(start, end, 0)
+        if redo is None:
+            return end
+        start, first = redo, 1
+    for attempt in range(first, MAX_REDO):
         end = motion.advance(start, t0, t1)
         redo = motion.check(start, end, attempt)
         if redo is None:
@@ -101,15 +119,26 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
         state = shard_particles(state, mesh, motion.scene.n_parcels)
     is_output = output_flags(motion)
     times = motion.times
+    # with a result folder, on the CPU (where the start's copy takes the same memory as the run),
+    # a chunk that the motion model can advance in place keeps its start on disk instead of in
+    # memory (StartSpill); made before the first row lists the folder's entries
+    spill = (StartSpill(spool) if spool is not None and mesh is None
+             and jax.default_backend() == "cpu" else None)
     if monitor is not None:
         monitor.begin(motion, times[is_output], rows)
-    with SimProgress(float(times[-1] - times[0]), progress, work=_work(motion, times)) as bar:
+    with SimProgress(float(times[-1] - times[0]), progress, work=_work(motion, times)) as bar, \
+            _closing(spill):
         bar.update_to(float(times[i0] - times[0]))
         for i in range(i0, len(times) - 1):
             t0, t1 = float(times[i]), float(times[i + 1])
             n_rows = len(rows)
             try:
-                new = advance_checked(motion, state, t0, t1)
+                if spill is not None and motion.advances_in_place(state):
+                    spill.save(state)
+                    if not spill.owns(state):  # drop the loop's references, then read it back
+                        state = new = None
+                        state = spill.load()
+                new = advance_checked(motion, state, t0, t1, spill)
                 if is_output[i + 1]:
                     rows.append(jax.device_get(motion.observe(new)))
                 note = motion.between_note(t1)
@@ -122,7 +151,7 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
                         rows.truncate(n_rows)
                     else:
                         del rows[n_rows:]
-                    monitor.failed(motion, i, t0, state, log, rows, err)
+                    monitor.failed(motion, i, t0, _last_good(state, spill), log, rows, err)
                 raise
             state = new
             if is_output[i + 1] and monitor is not None:
@@ -132,6 +161,25 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
                 monitor.chunk_done(motion, i + 1, t1, state, log, rows)
     traj = motion.finish(rows, log, state)
     return (traj, state) if return_state else traj
+
+
+@contextlib.contextmanager
+def _closing(spill: StartSpill | None):
+    """Remove the spill's file when the loop ends, however it ends."""
+    try:
+        yield spill
+    finally:
+        if spill is not None:
+            spill.close()
+
+
+def _last_good(state, spill: StartSpill | None):
+    """The chunk's start: ``state``, or where its buffers went into an in-place chunk (or it
+    was dropped to be read back), the spill's copy of it."""
+    if spill is not None and (state is None or any(
+            isinstance(x, jax.Array) and x.is_deleted() for x in jax.tree_util.tree_leaves(state))):
+        return spill.load()
+    return state
 
 
 def restore(motion: AbstractMotion, checkpoint: dict, params=None, spool=None):

@@ -1,0 +1,104 @@
+"""The start of a chunk kept on disk while the chunk advances in place.
+
+A motion model whose chunks may reuse the buffers of their start state for the result
+(:meth:`~drumheat.motion.base.AbstractMotion.advance_in_place`, buffer donation) holds one copy
+of its state in memory during a chunk instead of two, the start and the end. The run still
+needs the start when the chunk fails a check: a neighbour-buffer overflow redoes the chunk from
+it, and a failure writes it as the last good state into the failure checkpoint. The run loop
+(:func:`drumheat.runner.loop.simulate`, with a result folder on the CPU) therefore writes it to
+files in the folder's log directory before each such chunk and reads it back only then. The
+files hold one state (about 0.5 kB per particle in float64), are overwritten by every chunk and
+removed when the run ends; the writing costs a pass over the state per chunk (a chunk is
+thousands of steps).
+"""
+
+from __future__ import annotations
+
+import gc
+import shutil
+import weakref
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["StartSpill"]
+
+#: the folder in the run's log directory that holds the start of the running chunk
+SPILL_DIR = "chunk-start"
+
+
+class StartSpill:
+    """The start state of the running chunk, on disk.
+
+    Parameters
+    ----------
+    folder : path
+        Where its files go (the run's log directory, made here if missing), in a folder
+        :data:`SPILL_DIR`.
+
+    :meth:`save` writes a state before its chunk; :meth:`load` reads it back onto the default
+    device (the same tree, shapes and dtypes); :meth:`owns` tells whether a state's buffers are
+    the loop's own, as donation needs (the state a chunk ended with, :meth:`adopt`); any other
+    is read back from the files just written, so that the caller's arrays are never donated.
+    """
+
+    def __init__(self, folder):
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.path = self.folder / SPILL_DIR
+        self._treedef = None
+        self._own: list = []  # weak references to the arrays of the last chunk's end
+
+    def save(self, state) -> None:
+        """Write ``state`` (a PyTree of arrays) to the folder, one ``.npy`` file per leaf (no
+        second copy of the whole state in memory: on the CPU the arrays are written from their
+        own buffers)."""
+        leaves, treedef = jax.tree_util.tree_flatten(state)
+        for x in leaves:
+            if not isinstance(x, jax.Array) or x.weak_type:
+                raise TypeError("a state kept on disk must consist of strongly typed arrays; "
+                                f"got {type(x).__name__}")
+        self.path.mkdir(exist_ok=True)
+        for k, x in enumerate(leaves):
+            np.save(self.path / f"{k}.npy", np.asarray(x), allow_pickle=False)
+        self._treedef = treedef
+
+    def load(self):
+        """The state last saved, on the default device, in buffers of its own.
+
+        The files are mapped, not read into memory first: a temporary copy of each array would
+        go through the C library's allocator, which after freeing it keeps later buffers of that
+        size in its heap instead of returning them to the system (glibc's adaptive threshold
+        for mapping large blocks), so the run's resident memory would stay higher."""
+        if self._treedef is None:
+            raise RuntimeError("no state has been saved")
+        leaves = []
+        for k in range(self._treedef.num_leaves):
+            mapped = np.load(self.path / f"{k}.npy", mmap_mode="r", allow_pickle=False)
+            # copied into a buffer of its own (jax.device_put of a mapped array on the CPU keeps
+            # the mapping as the buffer)
+            leaves.append(jax.block_until_ready(jnp.array(mapped, copy=True)))
+            del mapped
+        gc.collect()  # the copies leave references to the mappings in cycles: unmap them now
+        return jax.tree_util.tree_unflatten(self._treedef, leaves)
+
+    def owns(self, state) -> bool:
+        """Whether the arrays of ``state`` are those a chunk returned (:meth:`adopt`), which no
+        one else holds; any other state (the initial one, one that the host-side work between
+        chunks rebuilt, a restored one) is to be read back from the files (:meth:`load`), after
+        the caller has dropped it, before its buffers may be donated."""
+        own = {id(r()) for r in self._own if r() is not None}
+        leaves = jax.tree_util.tree_leaves(state)
+        return bool(leaves) and all(id(x) in own for x in leaves)
+
+    def adopt(self, state) -> None:
+        """Record ``state`` (the end of a chunk) as the loop's own (:meth:`owns`)."""
+        self._own = [weakref.ref(x) for x in jax.tree_util.tree_leaves(state)]
+
+    def close(self) -> None:
+        """Remove the files."""
+        shutil.rmtree(self.path, ignore_errors=True)
+        self._treedef = None
+        self._own = []
