@@ -11,7 +11,10 @@ old code and on the new one, then compare::
 per scene; ``diff`` prints, per scene, the largest absolute difference of every time-series
 column and of the particle temperatures, and the largest relative one. The overrides below
 shorten each scene to a few output intervals while keeping its code path (DEM scenes keep
-their recording and replay, the glass drums switch from coupled DEM to replay).
+their recording and replay, the glass drums switch from coupled DEM to replay). With
+``--folder`` each scene runs into a result folder (a temporary one), as ``drumheat run`` does:
+on the CPU its DEM chunks then advance in place with their start on disk
+(``drumheat.runner.spill``), which must give the same numbers.
 """
 
 from __future__ import annotations
@@ -51,7 +54,9 @@ SHORT = {
 }
 
 
-def run_all(out: Path, only: list[str] | None) -> None:
+def run_all(out: Path, only: list[str] | None, folder: bool = False) -> None:
+    import tempfile
+
     import drumheat as dh
 
     out.mkdir(parents=True, exist_ok=True)
@@ -63,12 +68,14 @@ def run_all(out: Path, only: list[str] | None) -> None:
             continue
         start = time.perf_counter()
         try:
-            res = dh.run(dh.load_scene(name, ov), progress=False)
+            with tempfile.TemporaryDirectory() as tmp:  # the result may read its folder
+                res = dh.run(dh.load_scene(name, ov), progress=False,
+                             out=Path(tmp) / name if folder else None)
+                res.timeseries.to_csv(out / f"{name}.csv", index=False, float_format="%.17g")
+                np.savez(out / f"{name}.npz", t=res.t, T=res.T)
         except Exception as err:  # noqa: BLE001 - report and go on with the next scene
             print(f"{name}: FAILED {type(err).__name__}: {err}", flush=True)
             continue
-        res.timeseries.to_csv(out / f"{name}.csv", index=False, float_format="%.17g")
-        np.savez(out / f"{name}.npz", t=res.t, T=res.T)
         print(f"{name}: {len(res.t)} outputs, {time.perf_counter() - start:.1f} s", flush=True)
 
 
@@ -119,12 +126,14 @@ def main(argv=None) -> int:
     r = sub.add_parser("run")
     r.add_argument("out", type=Path)
     r.add_argument("--only", nargs="*")
+    r.add_argument("--folder", action="store_true",
+                   help="run each scene into a (temporary) result folder, as drumheat run does")
     d = sub.add_parser("diff")
     d.add_argument("a", type=Path)
     d.add_argument("b", type=Path)
     args = p.parse_args(argv)
     if args.cmd == "run":
-        run_all(args.out, args.only)
+        run_all(args.out, args.only, args.folder)
         return 0
     return diff(args.a, args.b)
 

@@ -68,10 +68,9 @@ class StartSpill:
     def load(self):
         """The state last saved, on the default device, in buffers of its own.
 
-        The files are mapped, not read into memory first: a temporary copy of each array would
-        go through the C library's allocator, which after freeing it keeps later buffers of that
-        size in its heap instead of returning them to the system (glibc's adaptive threshold
-        for mapping large blocks), so the run's resident memory would stay higher."""
+        Each file is mapped and copied into a new buffer: no second copy of an array in the
+        process's own memory (the mapped pages are the file's, which the system can drop), and
+        the mappings are released before this returns."""
         if self._treedef is None:
             raise RuntimeError("no state has been saved")
         leaves = []
