@@ -165,7 +165,7 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
 
 @contextlib.contextmanager
 def _closing(spill: StartSpill | None):
-    """Remove the spill's file when the loop ends, however it ends."""
+    """Remove the spill's files when the loop ends, however it ends."""
     try:
         yield spill
     finally:
