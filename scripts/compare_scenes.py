@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -55,8 +56,6 @@ SHORT = {
 
 
 def run_all(out: Path, only: list[str] | None, folder: bool = False) -> None:
-    import tempfile
-
     import drumheat as dh
 
     out.mkdir(parents=True, exist_ok=True)

@@ -54,13 +54,11 @@ def advance_checked(motion: AbstractMotion, state, t0: float, t1: float,
     usual."""
     start, first = state, 0
     if spill is not None and motion.advances_in_place(state):
-        end = motion.advance_in_place(state, t0, t1)
-        del state, start  # donated
+        end = motion.advance_in_place(state, t0, t1)  # takes the buffers of `state`
         if motion.passes(end):
             spill.adopt(end)
             return end
-        start = spill.load()
-        redo = motion.check(start, end, 0)
+        redo = motion.check(spill.load(), end, 0)
         if redo is None:
             return end
         start, first = redo, 1
