@@ -85,8 +85,8 @@ def test_resting_dem_bed_matches_the_static_model(gap):
     state = dem.run(state, 2000)
     c = dem.contacts(state)
     h = bed.dt
-    net_dem = thermal_network(state.nbrs.idx, 30, c.pair_conducts * h, c.wall_conducts * h,
-                              jnp.asarray(bed.wall_heated), 1, h)
+    net_dem = thermal_network(state.nbrs.idx, 30, c.pair_conducts.astype(jnp.int32),
+                              c.wall_conducts * h, jnp.asarray(bed.wall_heated), 1, h, h)
     pairs, wall = find_contacts_2d_drum(np.asarray(state.position), bed.diameter, 0.05, gap,
                                         wall_tolerance=bed.setup.conduction_gap[1])
     assert len(pairs) == int(np.sum(c.pair_conducts)) > 20
@@ -100,8 +100,8 @@ def test_resting_dem_bed_matches_the_static_model(gap):
     # and a coupled step applies exactly that flow on the contacts at its end positions (to the
     # round-off of T ~ 300 K)
     new, c_new = dem.step(state)
-    net_new = thermal_network(new.nbrs.idx, 30, c_new.pair_conducts * h, c_new.wall_conducts * h,
-                              jnp.asarray(bed.wall_heated), 1, h)
+    net_new = thermal_network(new.nbrs.idx, 30, c_new.pair_conducts.astype(jnp.int32),
+                              c_new.wall_conducts * h, jnp.asarray(bed.wall_heated), 1, h, h)
     q_new, _ = model.heat_flows(T, net_new)
     np.testing.assert_allclose(new.extra.T, T + h * q_new / model.particles.capacity,
                                rtol=0, atol=1e-12)
@@ -202,11 +202,12 @@ def test_padding_slots_of_the_thermal_network_add_nothing():
 
     n, h = 5, 1e-3
     idx = jnp.array([[0, 0, 1, 3, n, n, n], [1, 2, 4, 4, n, n, n]])
-    times = jnp.array([1.0, 0.5, 0.25, 1.0, 1.0, 1.0, 1.0]) * h  # padding times are not read
-    no_wall = (jnp.zeros(n), jnp.array([False]), 1, h)
-    net = thermal_network(idx, n, times, *no_wall)
-    cut = thermal_network(idx[:, :4], n, times[:4], *no_wall)
-    assert np.all(np.asarray(net.pair_i)[4:] == n) and np.all(np.asarray(net.pair_weight)[4:] == 0)
+    steps = jnp.array([4, 2, 1, 4, 4, 4, 4], jnp.int32)  # padding steps are not read
+    no_wall = (jnp.zeros(n), jnp.array([False]), 1, h, h / 4)
+    net = thermal_network(idx, n, steps, *no_wall)
+    cut = thermal_network(idx[:, :4], n, steps[:4], *no_wall)
+    assert np.all(np.asarray(net.pair_i)[4:] == n)
+    assert np.array_equal(net.pair_weights(n), [1.0, 0.5, 0.25, 1.0, 0.0, 0.0, 0.0])
     particles = ThermalParticles(diameter=jnp.full(n, 4e-3), mass=jnp.full(n, 1e-4),
                                  heat_capacity=jnp.full(n, 900.0))
     T = jnp.array([300.0, 310.0, 320.0, 330.0, 340.0])

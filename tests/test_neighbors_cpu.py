@@ -87,6 +87,44 @@ def test_same_pairs_order_and_sources(dim, periodic, dtype, spread, pair_order):
                                   np.where(np.asarray(sb) >= 0, np.asarray(sb) + 1.0, 0.0))
 
 
+@pytest.mark.parametrize("pair_order", ["index", "cell"])
+def test_rebuild_and_carry_in_the_old_buffers(pair_order):
+    """A rebuild whose old list is donated writes the new list into its buffer, and
+    ``NeighborSetup.take_pairs`` carries per-pair data of any dtype in the data's own buffer
+    (XLA aliases both; the memory a rebuild needs, docs/performance.md): the same pairs,
+    sources and data, bit for bit, as without donation and as ``take_pair_data``."""
+    from drumheat.mechanics.neighbors import take_pair_data
+
+    rng = np.random.default_rng(7)
+    n, dim, periodic = 2500, 3, 0.12
+    lo, hi = np.array([-0.15, -0.15, 0.0]), np.array([0.15, 0.15, periodic])
+    pos = jnp.asarray(rng.uniform(lo, hi, (n, dim)))
+    _, cp = _setups(dim, periodic, lo, hi, pair_order=pair_order)
+    nbrs = cp.allocate(pos, min_cell_capacity=40)
+    moved = pos + jnp.asarray(rng.normal(0.0, 0.003, (n, dim)))
+    moved = moved.at[:, -1].set(jnp.mod(moved[:, -1], periodic))
+    plain = jax.jit(cp.rebuild_with_sources)(moved, nbrs)
+    copy = jax.tree_util.tree_map(jnp.copy, nbrs)
+    donated = jax.jit(cp.rebuild_with_sources, donate_argnums=1)
+    m = nbrs.idx.shape[1]
+    aliased = donated.lower(moved, copy).compile().memory_analysis().alias_size_in_bytes
+    assert aliased >= 2 * m * 4  # the new list took the old one's buffer
+    new, src = donated(moved, copy)
+    for x, y in zip(jax.tree_util.tree_leaves(plain), jax.tree_util.tree_leaves((new, src))):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    assert 0 < int(jnp.sum(src >= 0)) < int(jnp.sum(new.idx[0] < n))  # carried and new pairs
+    take = jax.jit(cp.take_pairs, donate_argnums=0)
+    for dtype, tail in [(np.float64, (3,)), (np.float32, (2,)), (np.int32, ()), (np.int8, (4,))]:
+        data = jnp.asarray((rng.normal(0.0, 100.0, (m,) + tail)).astype(dtype))
+        want = np.asarray(take_pair_data(data, src))
+        ma = take.lower(data, src).compile().memory_analysis()
+        assert ma.alias_size_in_bytes == data.nbytes  # in place
+        got = take(jnp.copy(data), src)
+        assert got.dtype == data.dtype
+        np.testing.assert_array_equal(np.asarray(got), want)
+        np.testing.assert_array_equal(np.asarray(jax.jit(cp.take_pairs)(data, src)), want)
+
+
 def test_a_numbering_that_keeps_neighbours_near_is_kept():
     """Pair order "cell": particles numbered along their cells need no layout of their own
     (NeighborSetup.layout_order): both builds keep the canonical list and give the order

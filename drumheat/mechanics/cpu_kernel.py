@@ -28,7 +28,7 @@ docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
 The same library holds the neighbour rebuild of such runs (``neighbor_kernel.cc``,
 :func:`neighbor_pairs`): the pairs of the XLA cell list in its order (canonical, or grouped in
 the cell order) and, for carrying the springs and other per-pair data, the old slot of each
-pair.
+pair; :func:`take_pair_data_in_place` then carries each per-pair array in its own buffer.
 
 Scope: 2D (monolayer: x-y, spin about z) and 3D, float32 and float64 mechanics, any number of
 materials (per-type contact tables), rolling resistance, walls, pair conduction, friction
@@ -73,13 +73,14 @@ import jax.numpy as jnp
 import numpy as np
 from drumheat.environment import cache_dir_setting
 
-__all__ = ["TARGET", "HEAT_TARGET", "NEIGHBOR_TARGET", "available", "check_supported",
-           "contacts", "contact_heat", "kernel_params", "load", "neighbor_pairs",
-           "unsupported_reasons"]
+__all__ = ["TARGET", "HEAT_TARGET", "NEIGHBOR_TARGET", "TAKE_TARGET", "available",
+           "check_supported", "contacts", "contact_heat", "kernel_params", "load",
+           "neighbor_pairs", "take_pair_data_in_place", "unsupported_reasons"]
 
 TARGET = "drumheat_contacts"
 HEAT_TARGET = "drumheat_contact_heat"  # the friction heat's second pass
 NEIGHBOR_TARGET = "drumheat_neighbors"
+TAKE_TARGET = "drumheat_take_pairs"  # per-pair data carried to a rebuilt list in place
 SOURCE = Path(__file__).with_name("contact_kernel.cc")
 #: the sources compiled into the one library: the contact loop and the neighbour rebuild
 SOURCES = (SOURCE, Path(__file__).with_name("neighbor_kernel.cc"))
@@ -198,6 +199,8 @@ def _probe() -> tuple[bool, str]:
         jax.ffi.register_ffi_target(HEAT_TARGET, jax.ffi.pycapsule(lib.ContactHeat),
                                     platform="cpu")
         jax.ffi.register_ffi_target(NEIGHBOR_TARGET, jax.ffi.pycapsule(lib.Neighbors),
+                                    platform="cpu")
+        jax.ffi.register_ffi_target(TAKE_TARGET, jax.ffi.pycapsule(lib.TakePairs),
                                     platform="cpu")
     except (OSError, AttributeError) as e:
         return False, f"the compiled C++ contact kernel {out} cannot be loaded ({e})"
@@ -446,10 +449,37 @@ def neighbor_pairs(position, old_idx, capacity: int, cells, cell_size, cutoff: f
     sd = jax.ShapeDtypeStruct
     outs = [sd((2, int(capacity)), i32), sd((int(capacity),), i32), sd((1,), i32), sd((1,), i32),
             sd((n,), i32)]
-    idx, src, total, fullest, order = jax.ffi.ffi_call(NEIGHBOR_TARGET, outs)(
+    # the new list in the old one's buffer where it has the same capacity (a rebuild; XLA
+    # copies the old list first where it is still read later)
+    alias = {1: 0} if tuple(old_idx.shape) == (2, int(capacity)) else {}
+    idx, src, total, fullest, order = jax.ffi.ffi_call(NEIGHBOR_TARGET, outs,
+                                                       input_output_aliases=alias)(
         position, old_idx.astype(i32), n0=np.int64(cells[0]), n1=np.int64(cells[1]),
         n2=np.int64(cells[2]), s0=np.float64(size[0]), s1=np.float64(size[1]),
         s2=np.float64(size[2]), cut2=np.float64(float(cutoff) ** 2),
         L=np.float64(periodic_length or 0.0), cap=np.int64(cell_capacity),
         ranked=np.int32(bool(ranked)))
     return idx, src, total[0], fullest[0], order
+
+
+def take_pair_data_in_place(data, source):
+    """:func:`drumheat.mechanics.neighbors.take_pair_data` in one C++ pass that writes the
+    result into the buffer of ``data`` (an XLA alias; ``neighbor_kernel.cc``, ``TakePairs``):
+    row k of the result is row ``source[k]`` of ``data``, zeros where ``source[k] < 0``, the
+    same bits as the JAX gather. Where ``data`` dies in the call (the loop's springs and
+    contact times at a rebuild), a rebuild then holds one column of scratch (M words) beside
+    the list instead of a second copy of every per-pair array (docs/performance.md, Memory).
+
+    Args:
+      data: per-pair data (M, ...) of any dtype of 1, 2, 4 or 8 bytes.
+      source: (M,) int32 from :func:`neighbor_pairs`, the old slot of each new pair or -1; the
+        old and the new list have the same capacity M.
+    """
+    load()
+    data = jnp.asarray(data)
+    if source.shape != data.shape[:1]:
+        raise ValueError(f"take_pair_data_in_place: {source.shape[0]} sources for "
+                         f"{data.shape[0]} rows; the lists must have one capacity")
+    out = jax.ShapeDtypeStruct(data.shape, data.dtype)
+    return jax.ffi.ffi_call(TAKE_TARGET, out, input_output_aliases={1: 0})(
+        source.astype(jnp.int32), data)

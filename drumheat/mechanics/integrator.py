@@ -589,7 +589,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         # kind: the type of the state's extra, which remaps pdata
         pos, nbrs, spring, count, pdata = args
         new, source = neighbor.rebuild_with_sources(pos, nbrs)
-        remap = lambda a: take_pair_data(a, source)  # noqa: E731
+        remap = lambda a: neighbor.take_pairs(a, source)  # noqa: E731
         return new, remap(spring), count + 1, remap_pair_extra(kind, pdata, remap)
 
     def keep(args):

@@ -28,7 +28,8 @@
 // Attributes: n0, n1, n2 cells per axis (n2 = 1 in 2D); s0, s1, s2 their sides (m); cut2 the
 // squared cutoff; L the period of the last axis (0: none); cap the cell capacity; ranked (1: the
 // pairs in the layout order, 0: canonical order).
-// Outputs: 0 pairs (2, M) s32 in that order, padded with N; 1 for each new slot the old slot of
+// Outputs: 0 pairs (2, M) s32 in that order, padded with N (where M = M_old it may share input
+// 1's buffer: the old pairs are then copied aside first); 1 for each new slot the old slot of
 // the same pair, or -1 (new pair, padding); 2 pairs found (1) s32; 3 the most particles in one
 // cell (1) s32; 4 the layout order (N) s32: the particles in the order of their cells, or
 // 0 .. N-1 (the numbering will do, or not `ranked`).
@@ -81,9 +82,11 @@ struct Grid {
   int64_t cap;
 };
 
+// the pairs in canonical order into out (2, M), padded with N; the particles in the order of
+// their cells into cell_order (N)
 template <typename S, int D>
-void build(const S* x, int64_t n, const Grid& g, bool ranked, int32_t* out, int64_t m,
-           int64_t* total, int64_t* fullest, int32_t* cell_order) {
+void build(const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m, int64_t* total,
+           int64_t* fullest, int32_t* cell_order) {
   const int64_t nc = g.cells[0] * g.cells[1] * g.cells[2];
   const bool periodic = g.L > 0;
   const S size[3] = {S(g.size[0]), S(g.size[1]), S(g.size[2])};
@@ -153,24 +156,31 @@ void build(const S* x, int64_t n, const Grid& g, bool ranked, int32_t* out, int6
   }
   for (int64_t k = t; k < m; ++k) out[k] = out[m + k] = static_cast<int32_t>(n);  // padding
   *total = t;
-  const int64_t w = std::min(t, m);  // the pairs written, in canonical order
-  if (ranked && !numbering_will_do(out, m, w, order.data(), n)) {  // regroup in the cell order
-    std::vector<int64_t> start(n + 1, 0);  // each particle's first slot
-    for (int64_t k = 0; k < w; ++k) ++start[out[k] + 1];
-    for (int64_t p = 0; p < n; ++p) start[p + 1] += start[p];
-    std::vector<int32_t> old(out, out + w), oldj(out + m, out + m + w);
-    int64_t k = 0;
-    for (int64_t p = 0; p < n; ++p) {
-      const int32_t i = order[p];
-      for (int64_t u = start[i]; u < start[i + 1]; ++u, ++k) {
-        out[k] = old[u];
-        out[m + k] = oldj[u];
-      }
-    }
-  } else {
-    for (int64_t p = 0; p < n; ++p) order[p] = static_cast<int32_t>(p);  // the numbering's
-  }
   std::copy(order.begin(), order.end(), cell_order);
+}
+
+// With `ranked`, the canonical pairs out (2, M) (w of them written) and their sources src
+// regrouped in the cell order (cell_order), unless the numbering will do: then cell_order
+// becomes 0 .. N-1.
+void regroup(bool ranked, int32_t* out, int32_t* src, int64_t m, int64_t w, int32_t* cell_order,
+             int64_t n) {
+  if (!ranked || numbering_will_do(out, m, w, cell_order, n)) {
+    for (int64_t p = 0; p < n; ++p) cell_order[p] = static_cast<int32_t>(p);  // the numbering's
+    return;
+  }
+  std::vector<int64_t> start(n + 1, 0);  // each particle's first slot
+  for (int64_t k = 0; k < w; ++k) ++start[out[k] + 1];
+  for (int64_t p = 0; p < n; ++p) start[p + 1] += start[p];
+  std::vector<int32_t> oldi(out, out + w), oldj(out + m, out + m + w), olds(src, src + w);
+  int64_t k = 0;
+  for (int64_t p = 0; p < n; ++p) {
+    const int32_t i = cell_order[p];
+    for (int64_t u = start[i]; u < start[i + 1]; ++u, ++k) {
+      out[k] = oldi[u];
+      out[m + k] = oldj[u];
+      src[k] = olds[u];
+    }
+  }
 }
 
 // for each new slot, the old slot of the same pair or -1 (remap_pair_data's search). The lists
@@ -240,16 +250,26 @@ static ffi::Error NeighborsImpl(ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, i
   const bool f64 = pos.element_type() == ffi::DataType::F64;
   if (!f64 && pos.element_type() != ffi::DataType::F32)
     return ffi::Error::InvalidArgument("drumheat_neighbors: positions must be f32 or f64");
-  const bool rk = ranked != 0;
+  // the new list may take the old one's buffer (an XLA alias, cpu_kernel.neighbor_pairs):
+  // then the old pairs are kept aside until their sources are found
+  const int32_t* op = old.typed_data();
+  std::vector<int32_t> kept;
+  if (static_cast<const void*>(op) == static_cast<const void*>(out)) {
+    kept.assign(op, op + 2 * mo);
+    op = kept.data();
+  }
   const void* xp = pos.untyped_data();
   if (pd[1] == 3) {
-    if (f64) build<double, 3>(static_cast<const double*>(xp), n, g, rk, out, m, &t, &f, co);
-    else build<float, 3>(static_cast<const float*>(xp), n, g, rk, out, m, &t, &f, co);
+    if (f64) build<double, 3>(static_cast<const double*>(xp), n, g, out, m, &t, &f, co);
+    else build<float, 3>(static_cast<const float*>(xp), n, g, out, m, &t, &f, co);
   } else {
-    if (f64) build<double, 2>(static_cast<const double*>(xp), n, g, rk, out, m, &t, &f, co);
-    else build<float, 2>(static_cast<const float*>(xp), n, g, rk, out, m, &t, &f, co);
+    if (f64) build<double, 2>(static_cast<const double*>(xp), n, g, out, m, &t, &f, co);
+    else build<float, 2>(static_cast<const float*>(xp), n, g, out, m, &t, &f, co);
   }
-  sources(old.typed_data(), mo, out, m, n, src->typed_data());
+  // the sources of the canonical list (the old one's groups searched by i), then both regrouped
+  sources(op, mo, out, m, n, src->typed_data());
+  std::vector<int32_t>().swap(kept);
+  regroup(ranked != 0, out, src->typed_data(), m, std::min(t, m), co, n);
   const int64_t big = std::numeric_limits<int32_t>::max();
   total->typed_data()[0] = static_cast<int32_t>(std::min(t, big));
   fullest->typed_data()[0] = static_cast<int32_t>(std::min(f, big));
@@ -266,3 +286,58 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>()
         .Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>()
         .Ret<ffi::Buffer<ffi::S32>>());
+
+// Per-pair data carried to the rebuilt list in its own buffer (cpu_kernel.take_pair_data_in_place,
+// the twin of neighbors.take_pair_data): row k of the result is row src[k] of the data, or zeros
+// where src[k] < 0 (a new pair, padding). The data are moved as raw words of their element size,
+// one column at a time through a scratch column (M words), so that a rebuild holds one column
+// beside the list instead of a second copy of every per-pair array.
+//
+// Inputs: 0 the sources (M,) s32 (the rebuild's output 1); 1 the data (M, ...) of any type.
+// Output: 0 the data (M, ...) of that type, aliased to input 1.
+namespace {
+
+template <typename W>
+void take_rows(const W* in, W* out, const int32_t* src, int64_t m, int64_t c) {
+  if (in != out) {  // not aliased: gather straight across
+    for (int64_t k = 0; k < m; ++k)
+      for (int64_t q = 0; q < c; ++q) out[k * c + q] = src[k] >= 0 ? in[src[k] * c + q] : W(0);
+    return;
+  }
+  std::vector<W> col(static_cast<size_t>(m));
+  for (int64_t q = 0; q < c; ++q) {
+    for (int64_t k = 0; k < m; ++k) col[k] = out[k * c + q];
+    for (int64_t k = 0; k < m; ++k) out[k * c + q] = src[k] >= 0 ? col[src[k]] : W(0);
+  }
+}
+
+}  // namespace
+
+static ffi::Error TakePairsImpl(ffi::Buffer<ffi::S32> src, ffi::AnyBuffer data,
+                                ffi::Result<ffi::AnyBuffer> out) {
+  const auto dd = data.dimensions();
+  const int64_t m = src.dimensions()[0];
+  if (dd.size() < 1 || dd[0] != m)
+    return ffi::Error::InvalidArgument("drumheat_take_pairs: the data must have one row per slot");
+  int64_t c = 1;
+  for (size_t a = 1; a < dd.size(); ++a) c *= dd[a];
+  const int32_t* s = src.typed_data();
+  for (int64_t k = 0; k < m; ++k)
+    if (s[k] >= m) return ffi::Error::InvalidArgument("drumheat_take_pairs: a source beyond the list");
+  const size_t bytes = ffi::ByteWidth(data.element_type());
+  void* o = out->untyped_data();
+  const void* i = data.untyped_data();
+  if (m * c == 0) return ffi::Error::Success();
+  switch (bytes) {
+    case 1: take_rows(static_cast<const uint8_t*>(i), static_cast<uint8_t*>(o), s, m, c); break;
+    case 2: take_rows(static_cast<const uint16_t*>(i), static_cast<uint16_t*>(o), s, m, c); break;
+    case 4: take_rows(static_cast<const uint32_t*>(i), static_cast<uint32_t*>(o), s, m, c); break;
+    case 8: take_rows(static_cast<const uint64_t*>(i), static_cast<uint64_t*>(o), s, m, c); break;
+    default: return ffi::Error::InvalidArgument("drumheat_take_pairs: elements of 1, 2, 4 or 8 bytes");
+  }
+  return ffi::Error::Success();
+}
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(
+    TakePairs, TakePairsImpl,
+    ffi::Ffi::Bind().Arg<ffi::Buffer<ffi::S32>>().Arg<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>());

@@ -515,6 +515,17 @@ class NeighborSetup:
         return NeighborList(idx, pos, error, None if self.index_order else order,
                             nbrs.cell_list_capacity, nbrs.max_occupancy, self.cutoff), src
 
+    def take_pairs(self, data, source):
+        """Per-pair data (M, ...) carried to a list rebuilt by :meth:`rebuild_with_sources`
+        (``source`` (M,)): :func:`take_pair_data`, the same bits; with ``builder="cpu"`` in
+        the buffer of ``data`` (:func:`drumheat.mechanics.cpu_kernel.take_pair_data_in_place`),
+        which holds one column of scratch where the gather held a second array."""
+        if self.builder != "cpu" or source.shape != data.shape[:1]:
+            return take_pair_data(data, source)
+        from drumheat.mechanics.cpu_kernel import take_pair_data_in_place
+
+        return take_pair_data_in_place(data, source)
+
     def max_displacement_sq(self, position, nbrs):
         """Largest squared displacement (m^2) of any particle since the last build."""
         d = jax.vmap(self.displacement)(self.to_box(position), nbrs.reference_position)

@@ -116,15 +116,19 @@ class CoupledHeat(PairCarried):
         thermal step of the pairs the list drops stays in the count (:func:`contact_count`
         reads the same before and after)."""
         pair, count, k = arrays
-        new = PairTimes(*(None if a is None else remap(a) for a in pair))
+        steps = lambda t: jnp.sum(t, dtype=jnp.int32)  # noqa: E731
+        # the old steps summed before the remap: it may write the new times into the old
+        # ones' buffer (NeighborSetup.take_pairs), and without the barrier's order XLA kept a
+        # copy of the old times for a sum it might take later
+        before, time = jax.lax.optimization_barrier((steps(pair.time), pair.time))
+        new = PairTimes(*(None if a is None else remap(a) for a in pair._replace(time=time)))
         # the dropped pairs' steps as the difference of two int32 sums: each sum may wrap
         # around, their difference is exact while the dropped pairs' steps sum to less than
         # 2^31 (they lie beyond the cutoff, so they touched at most a few of the steps since
         # the last thermal step); summed
         # in float64 instead, XLA wrote a float64 copy of the counts in every rebuild, at the
         # run's memory peak (docs/performance.md)
-        steps = lambda t: jnp.sum(t, dtype=jnp.int32)  # noqa: E731
-        dropped = jnp.where(k > 0, (steps(pair.time) - steps(new.time)).astype(jnp.float64), 0.0)
+        dropped = jnp.where(k > 0, (before - steps(new.time)).astype(jnp.float64), 0.0)
         return new, count._replace(pair=count.pair + dropped), k
 
     def with_pair_arrays(self, arrays) -> "CoupledHeat":
@@ -136,7 +140,7 @@ class CoupledHeat(PairCarried):
         return dataclasses.replace(self, **fields)
 
 
-def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
+def thermal_network(idx, n, pair_steps, wall_time, wall_heated, n_walls, h, dt,
                     wall_ids=None) -> ContactNetwork:
     """Contact network of one thermal step from accumulated contact times.
 
@@ -144,14 +148,17 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
     ----------
     idx : int array (2, M)
         Neighbour pairs (padding index ``n``).
-    pair_time : array (M,)
-        Time each pair touched during the thermal step, s.
+    pair_steps : int array (M,)
+        DEM steps each pair touched during the thermal step (0 at the padding).
     wall_time : array (n * n_walls,)
         Time each (particle, wall primitive) touched, s, row-major.
     wall_heated : bool array (n_walls,)
         Primitives that exchange heat (they carry a temperature).
     h : float
         Thermal step, s; weights are contact-time fractions ``time / h``.
+    dt : float
+        DEM step, s: a pair's time is ``steps dt``, whose fraction the network forms one
+        block of slots at a time (``ContactNetwork.pair_unit``).
     wall_ids : int array (n_walls,), optional
         Wall id (index into the wall effect's temperatures) of each primitive; default 0 for
         all (a drum whose only heated wall is the shell).
@@ -160,12 +167,11 @@ def thermal_network(idx, n, pair_time, wall_time, wall_heated, n_walls, h,
     # pointed at particle 0 instead, each would add its zero into particle 0, and a GPU
     # serialises those atomic adds (docs/performance.md, GPU)
     i, j = idx[0], idx[1]
-    w_pair = jnp.where(i < n, pair_time / h, 0.0)
     wp = jnp.repeat(jnp.arange(n), n_walls)
     wk = jnp.tile(jnp.arange(n_walls), n)
     w_wall = wall_time / h * wall_heated[wk]
     wid = jnp.zeros_like(wp) if wall_ids is None else jnp.asarray(wall_ids, wp.dtype)[wk]
-    return ContactNetwork(i, j, w_pair, wp, wid, w_wall)
+    return ContactNetwork(i, j, pair_steps, wp, wid, w_wall, pair_unit=(dt, h))
 
 
 def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
@@ -215,8 +221,8 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
 
     def thermal_step(extra, ops):
         idx = ops[0] if drum_wall else ops
-        net = thermal_network(idx, n, extra.pair.time * dt, extra.wall_time * dt, heated,
-                              n_walls, h, wall_ids)
+        net = thermal_network(idx, n, extra.pair.time, extra.wall_time * dt, heated,
+                              n_walls, h, dt, wall_ids)
         m = model_of(extra)
         if drum_wall:
             q, ext, out = drum_wall_step(m, extra, net, ops[1], ops[2], h, n_walls)

@@ -54,7 +54,8 @@ def pad_network(net: ContactNetwork, n_pairs: int, n_wall: int) -> ContactNetwor
     angle = None if net.wall_angle is None else pad(net.wall_angle, n_wall, 0.0)
     return ContactNetwork(pad(net.pair_i, n_pairs, 0), pad(net.pair_j, n_pairs, 0),
                           pad(net.pair_weight, n_pairs, 0.0), pad(net.wall_particle, n_wall, 0),
-                          pad(net.wall_id, n_wall, 0), pad(net.wall_weight, n_wall, 0.0), angle)
+                          pad(net.wall_id, n_wall, 0), pad(net.wall_weight, n_wall, 0.0), angle,
+                          net.pair_unit)
 
 
 def polar_angle(position) -> np.ndarray:
@@ -104,7 +105,7 @@ class ThermalBed(AbstractMotion):
     def shared(self) -> dict:
         return dict(super().shared(), **{"the thermal solver": repr(self.solver)})
 
-    def cost(self, state) -> dict | None:
+    def cost(self, state, in_place: bool = False) -> dict | None:
         """For runs of many output intervals (each a solver call): the time of one interval,
         timed after a compiling call, times their number."""
         import time

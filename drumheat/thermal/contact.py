@@ -48,7 +48,8 @@ class ContactConduction(AbstractEffect):
 
     def conductance(self, particles: ThermalParticles, net: ContactNetwork) -> Array:
         """Conductance of every pair slot, W/K (0 for unused slots)."""
-        return self._conductance(particles, net.pair_i, net.pair_j, net.pair_weight)
+        return self._conductance(particles, net.pair_i, net.pair_j,
+                                 net.pair_weights(particles.diameter.shape[0]))
 
     def _conductance(self, particles: ThermalParticles, i, j, w) -> Array:
         return self.alpha * pair_area(particles, i, j) * w

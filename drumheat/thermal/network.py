@@ -37,7 +37,8 @@ class ContactNetwork(eqx.Module):
         of many slots should use it rather than a real particle: a GPU serialises the atomic
         adds of many slots into one particle.
     pair_weight : float array, shape (P,)
-        Contact-time fraction in [0, 1]; 0 marks an unused slot.
+        Contact-time fraction in [0, 1]; 0 marks an unused slot. With ``pair_unit`` the
+        contact time in whole steps instead (:meth:`pair_weights` gives the fractions).
     wall_particle : int array, shape (W,)
         Particle index of each particle-wall contact.
     wall_id : int array, shape (W,)
@@ -48,6 +49,13 @@ class ContactNetwork(eqx.Module):
         Polar angle of each particle-wall contact in the lab frame, rad (counter-clockwise
         from +x); set only for a drum wall with segments (``[heat.drum_wall]``,
         :mod:`drumheat.thermal.drum_wall`), which finds each contact's segment from it.
+    pair_unit : (dt, h) or None
+        ``pair_weight`` counts steps of ``dt`` s and a slot's weight is the fraction
+        ``(steps dt) / h`` of the thermal step ``h`` s (the coupled DEM's network,
+        :func:`drumheat.motion.coupling.thermal_network`); :meth:`pair_sum` forms the
+        fractions one block of slots at a time, so that no per-slot float array of the whole
+        list exists beside the counts. Unused slots (index N) weigh 0 in both whatever they
+        count (:attr:`n_pairs`, which does not know N, needs them to count 0).
     """
 
     pair_i: Array
@@ -57,6 +65,19 @@ class ContactNetwork(eqx.Module):
     wall_id: Array
     wall_weight: Array
     wall_angle: Array | None = None
+    pair_unit: tuple[float, float] | None = eqx.field(static=True, default=None)
+
+    def weights_of(self, raw: Array, i: Array, n: int) -> Array:
+        """The contact-time fractions of slots with ``pair_weight`` values ``raw`` and first
+        particles ``i`` in a bed of ``n`` particles (``raw`` itself without ``pair_unit``)."""
+        if self.pair_unit is None:
+            return raw
+        dt, h = self.pair_unit
+        return jnp.where(i < n, (raw * dt) / h, 0.0)
+
+    def pair_weights(self, n: int) -> Array:
+        """The contact-time fraction of every slot (P,) in a bed of ``n`` particles."""
+        return self.weights_of(self.pair_weight, self.pair_i, n)
 
     def pair_sum(self, fn, total: Array, sign: float = -1.0) -> Array:
         """``total`` (N,) plus, for every pair slot, ``q = fn(i, j, w)`` added at its particle
@@ -79,10 +100,10 @@ class ContactNetwork(eqx.Module):
             q = fn(i, j, w)
             return acc.at[i].add(q).at[j].add(sign * q)
 
-        m = self.pair_i.shape[0]
+        m, n = self.pair_i.shape[0], total.shape[0]
         blocks = min(PAIR_BLOCKS_MAX, -(-m // PAIR_BLOCK))
         if blocks <= 1:
-            return add(total, self.pair_i, self.pair_j, self.pair_weight)
+            return add(total, self.pair_i, self.pair_j, self.pair_weights(n))
         size = min(round_length(-(-m // blocks)), m)
         blocks = -(-m // size)
         # the two index rows as one (2, M) array: where they are the rows of a neighbour list
@@ -94,8 +115,8 @@ class ContactNetwork(eqx.Module):
             start = jnp.minimum(b * size, m - size)
             cut = lambda a: jax.lax.dynamic_slice_in_dim(a, start, size, axis=-1)  # noqa: E731
             own = start + jnp.arange(size) >= b * size
-            w = jnp.where(own, cut(self.pair_weight), 0.0)
             i, j = cut(ij)
+            w = jnp.where(own, self.weights_of(cut(self.pair_weight), i, n), 0.0)
             return add(acc, i, j, w)
 
         return jax.lax.fori_loop(0, blocks, block, total)
@@ -103,7 +124,8 @@ class ContactNetwork(eqx.Module):
     @property
     def n_pairs(self) -> Array:
         """Number of particle-particle contacts (weights summed)."""
-        return jnp.sum(self.pair_weight)
+        n = jnp.iinfo(jnp.int32).max  # with pair_unit: unused slots count 0 (class docstring)
+        return jnp.sum(self.pair_weights(n))
 
     @property
     def n_wall(self) -> Array:
