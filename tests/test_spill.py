@@ -83,9 +83,27 @@ def test_a_run_into_a_folder_advances_in_place_with_the_same_numbers(tmp_path, m
     ref = dh.run(scene, progress=False)
     calls = _count_in_place(monkeypatch)
     res = dh.run(scene, out=tmp_path / "run", progress=False)
-    assert calls["in_place"] == 4  # the scene's four chunks
+    assert calls["in_place"] == 2 + 4  # the estimate's two warm-ups, the scene's four chunks
     assert_identical(res, ref)
     assert not (tmp_path / "run" / ".log").exists()  # the spill went with the running folder
+
+
+@cpu_only
+def test_the_estimate_warms_up_in_place_on_the_runs_own_chunk():
+    """For a run into a folder the estimate's timed warm-up runs the chunk the run will run,
+    in the buffers of an initial state of its own (one state in memory, one compilation for
+    both), and leaves the motion model's own arrays alone."""
+    from drumheat.motion import make_motion
+    from drumheat.runner.loop import estimate
+
+    motion = make_motion(dem_scene())
+    cost = estimate(motion, in_place=True)
+    assert cost["seconds"] > 0 and cost["warmup_steps"] >= 1
+    assert motion.dem._run_chunk._cache_size() == 1  # compiled for the run's chunks
+    assert motion.dem._run_steps._cache_size() == 0  # the plain chunk was not compiled
+    again = estimate(motion)  # the initial state's shared arrays were not donated
+    assert again["mechanical_steps"] == cost["mechanical_steps"]
+    assert motion.dem._run_steps._cache_size() == 1
 
 
 @cpu_only

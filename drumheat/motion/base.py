@@ -142,10 +142,12 @@ class AbstractMotion(abc.ABC):
         """The :class:`Trajectory` of a run from its output rows (host arrays), its log and
         its last state."""
 
-    def cost(self, state) -> dict | None:
+    def cost(self, state, in_place: bool = False) -> dict | None:
         """What the run will cost, for the estimate shown before it starts: a dict with
         ``seconds`` (estimated wall time) and the step counts, or None where no estimate is
-        made (runs without mechanics are short)."""
+        made (runs without mechanics are short). ``in_place``: a timed warm-up may advance in
+        the buffers of ``state`` (:meth:`advance_in_place`'s chunk, the one such a run will
+        run), which uses ``state`` up."""
         return None
 
     def progress_work(self, t0: float, t1: float) -> float:

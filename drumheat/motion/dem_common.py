@@ -187,16 +187,24 @@ class DEMMotion(AbstractMotion):
         """Thermal steps of the whole run."""
         return self.mechanical_steps() // max(1, self.scene.dem.thermal_substeps)
 
-    def cost(self, state) -> dict:
+    def cost(self, state, in_place: bool = False) -> dict:
         """The run's step counts and its wall time estimated from a timed warm-up of
         :data:`WARMUP_STEPS` steps from ``state`` (after one compiling call), plus the host-side
         work of a chunk (observation and check, also timed after a compiling call) times the
-        number of chunks."""
+        number of chunks. ``in_place`` (where :meth:`advances_in_place`): both warm-ups run in
+        the buffers of ``state``, one after the other (the chunk a run into a result folder
+        runs on the CPU, so compiled once for both, and one state in memory instead of two)."""
         n = self.mechanical_steps()
         k = max(1, min(WARMUP_STEPS, n))
-        jax.block_until_ready(self.dem.run_steps(state, k))  # compiles
-        t0 = time.perf_counter()
-        end = jax.block_until_ready(self.dem.run_steps(state, k))
+        if in_place and self.advances_in_place(state):
+            warm = jax.block_until_ready(self.dem.run_steps_in_place(state, k))  # compiles
+            del state  # donated
+            t0 = time.perf_counter()
+            end = jax.block_until_ready(self.dem.run_steps_in_place(warm, k))
+        else:
+            jax.block_until_ready(self.dem.run_steps(state, k))  # compiles
+            t0 = time.perf_counter()
+            end = jax.block_until_ready(self.dem.run_steps(state, k))
         per_step = (time.perf_counter() - t0) / k
         jax.device_get(self.observe(end))  # compiles what an output and a check run
         self.dem._diag(end)

@@ -120,8 +120,7 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
     # with a result folder, on the CPU (where the start's copy takes the same memory as the run),
     # a chunk that the motion model can advance in place keeps its start on disk instead of in
     # memory (StartSpill); made before the first row lists the folder's entries
-    spill = (StartSpill(spool) if spool is not None and mesh is None
-             and jax.default_backend() == "cpu" else None)
+    spill = StartSpill(spool) if keeps_start_on_disk(spool is not None, mesh) else None
     if monitor is not None:
         monitor.begin(motion, times[is_output], rows)
     with SimProgress(float(times[-1] - times[0]), progress, work=_work(motion, times)) as bar, \
@@ -159,6 +158,14 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
                 monitor.chunk_done(motion, i + 1, t1, state, log, rows)
     traj = motion.finish(rows, log, state)
     return (traj, state) if return_state else traj
+
+
+def keeps_start_on_disk(folder: bool, mesh=None) -> bool:
+    """Whether :func:`simulate` runs the chunks that a motion model can advance in place so,
+    keeping each chunk's start on disk (:class:`StartSpill`): runs with a result folder
+    (``folder``) on the CPU, where a copy of the start takes the same memory as the run, not
+    sharded over a ``mesh``."""
+    return folder and mesh is None and jax.default_backend() == "cpu"
 
 
 @contextlib.contextmanager
@@ -222,10 +229,25 @@ def _duration_text(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h" if seconds < 172800 else f"{seconds / 86400:.1f} days"
 
 
-def estimate(motion: AbstractMotion, params=None, state=None) -> dict | None:
+def estimate(motion: AbstractMotion, params=None, state=None, in_place: bool = False
+             ) -> dict | None:
     """The cost of a run before it starts (:meth:`AbstractMotion.cost`) with a one-line
-    ``text``; None where the motion model makes no estimate."""
-    cost = motion.cost(motion.initial_state(params) if state is None else state)
+    ``text``; None where the motion model makes no estimate. ``in_place`` (for a run whose
+    chunks will run in place, :func:`keeps_start_on_disk`): the warm-up runs in the buffers of
+    the initial state made here (never in those of a ``state`` given)."""
+    own = state is None
+    if own and in_place:
+        # the warm-up may donate only buffers of its own: each leaf copied, one at a time (the
+        # initial state's own leaves are freed as their copies are made; arrays it shares with
+        # the motion model, e.g. its thermal parameters, stay with it)
+        leaves, treedef = jax.tree_util.tree_flatten(motion.initial_state(params))
+        for k in range(len(leaves)):
+            leaves[k] = jax.block_until_ready(jnp.array(leaves[k], copy=True))
+        state = jax.tree_util.tree_unflatten(treedef, leaves)
+        del leaves
+    elif own:
+        state = motion.initial_state(params)
+    cost = motion.cost(state, in_place=in_place and own)
     if cost is None:
         return None
     cost = dict(cost)
@@ -428,7 +450,7 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
                              "(particle-axis sharding); supported: static, dem")
         mesh = make_mesh(devs)
     if checkpoint is None:
-        cost = estimate(motion, params)
+        cost = estimate(motion, params, in_place=keeps_start_on_disk(out is not None, mesh))
         check_cost(cost, allow_long)
         if cost is not None and progress:
             print(cost["text"], file=sys.stderr, flush=True)
