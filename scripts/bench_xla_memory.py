@@ -3,10 +3,12 @@
 For each N the built-in scene ``glass-drum-3d`` (its knob: depth = N x 2.6e-5 m; the
 benchmark's poured bed from ``--packings``, as ``bench_vs_liggghts.py`` makes it) is built
 through the product path (``make_motion``), and the chunk the run loop runs
-(``motion.dem._run_steps``) is compiled, not run. Printed per N, in bytes per particle, XLA's
-own account of it (``memory_analysis()``): the arguments (the state), the outputs (the new
-state) and the temporaries, which is what a GPU allocates for a run and what the CPU's
-resident memory holds at the chunk's peak besides the compiler.
+(``motion.dem._run_steps``; with ``--in-place`` the chunk that runs in the state's own buffers,
+``motion.dem._run_chunk``, which a run into a result folder runs on the CPU) is compiled, not
+run. Printed per N, in bytes per particle, XLA's own account of it (``memory_analysis()``): the
+arguments (the state), the outputs (the new state), the part of them that shares the
+arguments' buffers (aliased) and the temporaries, which is what a GPU allocates for a run and
+what the CPU's resident memory holds at the chunk's peak besides the compiler.
 
 With ``--peak`` each N is compiled in a child process that dumps XLA's buffer assignment and
 live ranges (``XLA_FLAGS=--xla_dump_to``), and the script reads them against each other: the
@@ -14,7 +16,7 @@ instruction at which the temporaries' live bytes are highest, and the values liv
 largest first). That tells which part of the step sets the peak (docs/performance.md, memory).
 
 Usage: python scripts/bench_xla_memory.py --n 20000 50000 [--precision float64|mixed|float32]
-       [--backend auto|cpu|jax] [--packings DIR] [--peak] [--top 12]
+       [--backend auto|cpu|jax] [--packings DIR] [--in-place] [--peak] [--top 12]
 """
 
 from __future__ import annotations
@@ -29,8 +31,9 @@ import tempfile
 from pathlib import Path
 
 
-def analyse(n: int, precision: str, backend: str, packings) -> dict:
-    """XLA's memory account of the scene's compiled chunk at N, bytes per particle."""
+def analyse(n: int, precision: str, backend: str, packings, in_place: bool = False) -> dict:
+    """XLA's memory account of the scene's compiled chunk at N (``in_place``: the donated
+    one), bytes per particle."""
     import jax.numpy as jnp
 
     from bench_vs_liggghts import scene_for, scene_packing
@@ -38,7 +41,8 @@ def analyse(n: int, precision: str, backend: str, packings) -> dict:
 
     motion = make_motion(scene_for(n, backend, scene_packing(n, packings), precision))
     state = motion.initial_state()
-    ma = motion.dem._run_steps.lower(state, jnp.asarray(100, jnp.int32)).compile()
+    chunk = motion.dem._run_chunk if in_place else motion.dem._run_steps
+    ma = chunk.lower(state, jnp.asarray(100, jnp.int32)).compile()
     ma = ma.memory_analysis()
     return dict(backend=motion.contact_backend().backend,
                 slots=int(state.nbrs.idx.shape[1]),
@@ -87,7 +91,7 @@ def peak_values(dump: Path, top: int) -> dict:
 
 
 def child(args) -> dict:
-    out = analyse(args.child, args.precision, args.backend, args.packings)
+    out = analyse(args.child, args.precision, args.backend, args.packings, args.in_place)
     if args.dump:
         out.update(peak_values(Path(args.dump), args.top))
     return out
@@ -101,6 +105,9 @@ def main():
     ap.add_argument("--packings", default=None,
                     help="folder of the scene's poured beds (glass-drum-3d_N.npz), poured there "
                          "when missing; default: pour in every run")
+    ap.add_argument("--in-place", action="store_true",
+                    help="the chunk that runs in the state's buffers (a run into a result "
+                         "folder on the CPU) instead of the one that keeps its start")
     ap.add_argument("--peak", action="store_true",
                     help="also the instruction and the values at the temporaries' peak")
     ap.add_argument("--top", type=int, default=12, help="values listed at the peak")
@@ -110,16 +117,19 @@ def main():
     if args.child is not None:
         print(json.dumps(child(args)))
         return
-    print(f"glass-drum-3d, {args.precision} mechanics: XLA's account of the compiled chunk "
-          "(bytes per particle)")
-    print("| N | backend | pair slots | arguments | outputs | temporaries | total |")
-    print("|---|---|---|---|---|---|---|")
+    which = "in place (donated)" if args.in_place else "keeping its start"
+    print(f"glass-drum-3d, {args.precision} mechanics: XLA's account of the compiled chunk, "
+          f"{which} (bytes per particle; total: arguments + outputs - aliased + temporaries)")
+    print("| N | backend | pair slots | arguments | outputs | aliased | temporaries | total |")
+    print("|---|---|---|---|---|---|---|---|")
     peaks = []
     for n in args.n:
         with tempfile.TemporaryDirectory() as dump:
             env = dict(os.environ)
             cmd = [sys.executable, __file__, "--child", str(n), "--precision", args.precision,
                    "--backend", args.backend, "--top", str(args.top)]
+            if args.in_place:
+                cmd.append("--in-place")
             if args.packings:
                 cmd += ["--packings", args.packings]
             if args.peak:
@@ -130,9 +140,10 @@ def main():
                 print(f"| {n} | failed (exit {out.returncode}): {out.stderr.strip()[-300:]} |")
                 continue
             r = json.loads(out.stdout.strip().splitlines()[-1])
-        total = r["arguments"] + r["outputs"] + r["temporaries"]
+        total = r["arguments"] + r["outputs"] - r["aliased"] + r["temporaries"]
         print(f"| {n} | {r['backend']} | {r['slots']} | {r['arguments']:.0f} | "
-              f"{r['outputs']:.0f} | {r['temporaries']:.0f} | {total:.0f} |", flush=True)
+              f"{r['outputs']:.0f} | {r['aliased']:.0f} | {r['temporaries']:.0f} | "
+              f"{total:.0f} |", flush=True)
         if args.peak:
             peaks.append((n, r))
     for n, r in peaks:
