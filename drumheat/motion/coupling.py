@@ -149,7 +149,7 @@ def thermal_network(idx, n, pair_steps, wall_time, wall_heated, n_walls, h, dt,
     idx : int array (2, M)
         Neighbour pairs (padding index ``n``).
     pair_steps : int array (M,)
-        DEM steps each pair touched during the thermal step (0 at the padding).
+        DEM steps each pair touched during the thermal step (the padding's are not read).
     wall_time : array (n * n_walls,)
         Time each (particle, wall primitive) touched, s, row-major.
     wall_heated : bool array (n_walls,)

@@ -236,18 +236,20 @@ def estimate(motion: AbstractMotion, params=None, state=None, in_place: bool = F
     chunks will run in place, :func:`keeps_start_on_disk`): the warm-up runs in the buffers of
     the initial state made here (never in those of a ``state`` given)."""
     own = state is None
-    if own and in_place:
+    if own:
+        state = motion.initial_state(params)
+    in_place = in_place and own and motion.advances_in_place(state)
+    if in_place:
         # the warm-up may donate only buffers of its own: each leaf copied, one at a time (the
         # initial state's own leaves are freed as their copies are made; arrays it shares with
         # the motion model, e.g. its thermal parameters, stay with it)
-        leaves, treedef = jax.tree_util.tree_flatten(motion.initial_state(params))
+        leaves, treedef = jax.tree_util.tree_flatten(state)
+        del state
         for k in range(len(leaves)):
             leaves[k] = jax.block_until_ready(jnp.array(leaves[k], copy=True))
         state = jax.tree_util.tree_unflatten(treedef, leaves)
         del leaves
-    elif own:
-        state = motion.initial_state(params)
-    cost = motion.cost(state, in_place=in_place and own)
+    cost = motion.cost(state, in_place=in_place)
     if cost is None:
         return None
     cost = dict(cost)
