@@ -323,7 +323,8 @@ static ffi::Error TakePairsImpl(ffi::Buffer<ffi::S32> src, ffi::AnyBuffer data,
   for (size_t a = 1; a < dd.size(); ++a) c *= dd[a];
   const int32_t* s = src.typed_data();
   for (int64_t k = 0; k < m; ++k)
-    if (s[k] >= m) return ffi::Error::InvalidArgument("drumheat_take_pairs: a source beyond the list");
+    if (s[k] >= m)
+      return ffi::Error::InvalidArgument("drumheat_take_pairs: a source beyond the list");
   const size_t bytes = ffi::ByteWidth(data.element_type());
   void* o = out->untyped_data();
   const void* i = data.untyped_data();
@@ -333,7 +334,8 @@ static ffi::Error TakePairsImpl(ffi::Buffer<ffi::S32> src, ffi::AnyBuffer data,
     case 2: take_rows(static_cast<const uint16_t*>(i), static_cast<uint16_t*>(o), s, m, c); break;
     case 4: take_rows(static_cast<const uint32_t*>(i), static_cast<uint32_t*>(o), s, m, c); break;
     case 8: take_rows(static_cast<const uint64_t*>(i), static_cast<uint64_t*>(o), s, m, c); break;
-    default: return ffi::Error::InvalidArgument("drumheat_take_pairs: elements of 1, 2, 4 or 8 bytes");
+    default:
+      return ffi::Error::InvalidArgument("drumheat_take_pairs: elements of 1, 2, 4 or 8 bytes");
   }
   return ffi::Error::Success();
 }
