@@ -33,7 +33,7 @@ from drumheat.runner.checkpoint import CheckpointError, load_checkpoint, save_ch
 from drumheat.runner.compile_cache import enable_compilation_cache
 from drumheat.runner.progress import SimProgress
 from drumheat.runner.sharding import make_mesh, resolve_devices, shard_particles
-from drumheat.runner.spill import StartSpill
+from drumheat.runner.spill import StartSpill, copy_leaves
 from drumheat.scene import Scene, SceneError, load_scene
 
 __all__ = ["run", "simulate", "trace", "restore", "estimate", "advance_checked", "MAX_REDO",
@@ -240,14 +240,12 @@ def estimate(motion: AbstractMotion, params=None, state=None, in_place: bool = F
         state = motion.initial_state(params)
     in_place = in_place and own and motion.advances_in_place(state)
     if in_place:
-        # the warm-up may donate only buffers of its own: each leaf copied, one at a time (the
-        # initial state's own leaves are freed as their copies are made; arrays it shares with
-        # the motion model, e.g. its thermal parameters, stay with it)
+        # the warm-up may donate only buffers of its own (arrays the initial state shares with
+        # the motion model, e.g. its thermal parameters, stay with it; its own are freed as
+        # their copies are made)
         leaves, treedef = jax.tree_util.tree_flatten(state)
         del state
-        for k in range(len(leaves)):
-            leaves[k] = jax.block_until_ready(jnp.array(leaves[k], copy=True))
-        state = jax.tree_util.tree_unflatten(treedef, leaves)
+        state = jax.tree_util.tree_unflatten(treedef, copy_leaves(leaves))
         del leaves
     cost = motion.cost(state, in_place=in_place)
     if cost is None:

@@ -23,10 +23,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["StartSpill"]
+__all__ = ["StartSpill", "copy_leaves"]
 
 #: the folder in the run's log directory that holds the start of the running chunk
 SPILL_DIR = "chunk-start"
+
+
+def copy_leaves(leaves: list) -> list:
+    """Each array of ``leaves`` replaced by a copy in a buffer of its own (one a donation may
+    take), one at a time and in the list itself, so that an original no one else holds is freed
+    before the next is copied. Returns ``leaves``."""
+    for k in range(len(leaves)):
+        leaves[k] = jax.block_until_ready(jnp.array(leaves[k], copy=True))
+    return leaves
 
 
 class StartSpill:
@@ -73,13 +82,10 @@ class StartSpill:
         the mappings are released before this returns."""
         if self._treedef is None:
             raise RuntimeError("no state has been saved")
-        leaves = []
-        for k in range(self._treedef.num_leaves):
-            mapped = np.load(self.path / f"{k}.npy", mmap_mode="r", allow_pickle=False)
-            # copied into a buffer of its own (jax.device_put of a mapped array on the CPU keeps
-            # the mapping as the buffer)
-            leaves.append(jax.block_until_ready(jnp.array(mapped, copy=True)))
-            del mapped
+        # copied into buffers of their own (jax.device_put of a mapped array on the CPU keeps
+        # the mapping as the buffer)
+        leaves = copy_leaves([np.load(self.path / f"{k}.npy", mmap_mode="r", allow_pickle=False)
+                              for k in range(self._treedef.num_leaves)])
         gc.collect()  # the copies leave references to the mappings in cycles: unmap them now
         return jax.tree_util.tree_unflatten(self._treedef, leaves)
 
