@@ -17,6 +17,12 @@ leaves out what does not grow with N (compiled code, the compiler's own peak). (
 also lower the process's ``ru_maxrss``, so the run's own ``summary.json`` ``peak_memory_MB`` is
 not a measure here.)
 
+The runs keep the process's allocator as a user's run has it: :func:`drumheat.run` fixes
+glibc's mmap threshold at 1 MiB (:mod:`drumheat.runner.host_memory`), so that freed large
+buffers go back to the system. ``--malloc-threshold BYTES`` sets ``MALLOC_MMAP_THRESHOLD_``
+instead (earlier versions of this script set 1 MiB for every run, which measured code that kept
+glibc's dynamic threshold as if it did not).
+
 With ``--record-interval`` (the scene's is 0.05 s) a short run records as many intervals as a
 long one (``--record-interval 0.002 --duration 0.5 --replay-after 0.4``: 200 intervals, as the
 built-in drum's 250 by its switch), so that the recording's share of the peak shows. A run
@@ -29,7 +35,7 @@ the mechanics' arrays in float32).
 
 Usage: python scripts/bench_run_memory.py --n 10000 50000 [--packings DIR]
        [--duration 0.3] [--replay-after 0.2] [--record-interval S] [--no-folder]
-       [--precision float64|mixed|float32]
+       [--precision float64|mixed|float32] [--malloc-threshold BYTES]
 The packings are ``bench_vs_liggghts.py``'s (poured there the first time).
 """
 
@@ -126,6 +132,10 @@ def main():
                     help="run without a result folder (the recording stays in memory)")
     ap.add_argument("--precision", default="float64", choices=["float64", "mixed", "float32"],
                     help="the scene's dem.precision")
+    ap.add_argument("--malloc-threshold", type=int, default=None,
+                    help="glibc's MALLOC_MMAP_THRESHOLD_ for the runs, bytes (default: as a "
+                         "user's run has it: drumheat.run fixes it at 1 MiB itself; code "
+                         "before that kept glibc's dynamic threshold)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
@@ -142,7 +152,9 @@ def main():
     header()
     rows, anon_rows = [], []
     for n in args.n:
-        env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="1048576")
+        env = dict(os.environ)
+        if args.malloc_threshold:
+            env["MALLOC_MMAP_THRESHOLD_"] = str(args.malloc_threshold)
         cmd = [sys.executable, __file__, "--child", str(n), "--duration", str(args.duration),
                "--replay-after", str(args.replay_after), "--precision", args.precision]
         if args.packings:

@@ -262,13 +262,24 @@ def check_supported(dim, params, dtype, batch_axis) -> None:
 _TABLES = ("kn", "kt", "zeta_n", "zeta_t", "mu", "mu_roll")
 
 
-def uniform_or_all(values):
-    """``values`` (a concrete per-particle array) as :func:`contacts` may take it: the one
-    value, shape (1,), where all particles share it, else the array as it is."""
+def shared_value(values):
+    """``values`` (a concrete per-particle array): its one value, a 0-d array of its dtype,
+    where all particles share it, else the array as it is. A constant (N,) array that a
+    compiled step closes over stays in memory as one of its inputs (and XLA may write it out
+    anew where it is used); one value is broadcast in place (the integrator's inverse masses,
+    :func:`uniform_or_all`)."""
     a = np.asarray(values)
     if a.size > 1 and np.all(a == a.reshape(-1)[0]):
-        return jnp.asarray(a.reshape(-1)[:1])
+        return jnp.asarray(a.reshape(-1)[0], dtype=a.dtype)
     return values
+
+
+def uniform_or_all(values):
+    """``values`` (a concrete per-particle array) as :func:`contacts` may take it: the one
+    value, shape (1,), where all particles share it (:func:`shared_value`), else the array as
+    it is."""
+    v = shared_value(values)
+    return v.reshape(1) if v is not values else values
 
 
 def kernel_params(params, n_walls, dtype, dt, wall_omega, periodic_length=None,

@@ -57,6 +57,7 @@ import numpy as np
 
 from drumheat.geometry.walls import expand_walls, wall_bounds
 from drumheat.mechanics.contact_forces import ContactParams, critical_time_step
+from drumheat.mechanics.cpu_kernel import shared_value
 from drumheat.mechanics.conduction import PairConduction
 from drumheat.mechanics.dissipation import FrictionHeat, boundary_energy
 from drumheat.mechanics.errors import (
@@ -569,6 +570,11 @@ class DEM:
         return {k: float(v) for k, v in self._energies(state).items()}
 
 
+def _per_row(values):
+    """Per-particle ``values`` (N,) as a column that multiplies rows (N, k); a 0-d value as it is."""
+    return values if values.ndim == 0 else values[:, None]
+
+
 def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin,
                      periodic_length, rotation, always_rebuild, batch_axis, external_force,
                      conduction, extra_update, boundary_update):
@@ -577,8 +583,9 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     rebuilds, and the energy book."""
     n, mass, inertia, dtype = forces.n, forces.mass, forces.inertia, forces.dtype
     half = 0.5 * dt
-    inv_m = 1.0 / mass
-    inv_i = 1.0 / inertia
+    # one value where all particles share it (the same quotient either way)
+    inv_m = 1.0 / shared_value(mass)
+    inv_i = 1.0 / shared_value(inertia)
     half_skin_sq = (0.5 * skin) ** 2
     time_dtype = jnp.float64 if jax.config.jax_enable_x64 else dtype
 
@@ -598,9 +605,9 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
 
     def half_kick(v, w, f, tq):
         """``v + dt/2 F/m``, ``w + dt/2 M/I`` (w unchanged without rotation)."""
-        v = v + half * f * inv_m[:, None]
+        v = v + half * f * _per_row(inv_m)
         if rotation:
-            w = w + half * tq * (inv_i if tq.ndim == 1 else inv_i[:, None])
+            w = w + half * tq * (inv_i if tq.ndim == 1 else _per_row(inv_i))
         return v, w
 
     def kick(state: DEMState):

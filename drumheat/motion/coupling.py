@@ -203,7 +203,7 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     if per_wall and wall_ids is None:
         wall_ids = np.arange(n_walls, dtype=np.int32)
 
-    slot_heated = _slot_heated(heated, n)
+    heated_weights = _heated_weights(heated)
 
     def model_of(extra):
         return eqx.combine(extra.model, skeleton)
@@ -213,7 +213,7 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     def fold(extra):
         """``extra`` with the contact times since the last thermal step added to the
         recording's (if the run records) and the output interval's accumulators."""
-        extra = extra.replace(count=_count(extra, slot_heated, substeps))
+        extra = extra.replace(count=_count(extra, heated_weights, substeps))
         if extra.pair.rec_time is None:
             return extra
         pair = extra.pair._replace(rec_time=extra.pair.rec_time + extra.pair.time)
@@ -330,9 +330,11 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int, 
         friction=book)
 
 
-def _slot_heated(wall_heated, n):
-    """(n * n_walls,) 1.0 for the particle-wall slots of the heated walls, else 0.0."""
-    return jnp.tile(jnp.asarray(wall_heated, bool), n).astype(jnp.float64)
+def _heated_weights(wall_heated):
+    """(n_walls,) 1.0 for the heated walls, else 0.0: the weights of a particle's wall slots in
+    the count of heated-wall contact time (one per wall, not per particle-wall slot: a constant
+    array over all slots would stay in memory as an input of every compiled step)."""
+    return jnp.asarray(wall_heated, bool).astype(jnp.float64)
 
 
 def _steps(counts, most=None):
@@ -353,20 +355,21 @@ def _since_thermal_step(extra):
     return (jnp.where(fresh, 0, extra.pair.time), jnp.where(fresh, 0, extra.wall_time))
 
 
-def _pending(extra, slot_heated, most=None) -> ContactCount:
+def _pending(extra, heated, most=None) -> ContactCount:
     """The contact times since the last thermal step, summed as :class:`ContactCount`
-    (steps); ``most``: the most steps between thermal steps (:func:`_steps`), if known."""
+    (steps); ``heated``: :func:`_heated_weights`; ``most``: the most steps between thermal
+    steps (:func:`_steps`), if known."""
     # the pairs' times summed before the reset of a fresh state is applied (the same sum):
     # the reset's int32 copy of every slot is not written
     _, wall = _since_thermal_step(extra)
     pair = jnp.where(extra.k == 0, 0.0, _steps(extra.pair.time, most))
-    return ContactCount(pair, jnp.sum(wall * slot_heated))
+    # whole numbers of steps: the float64 sum is exact in any order
+    return ContactCount(pair, jnp.sum(wall.reshape(-1, heated.shape[-1]) * heated))
 
 
-def _count(extra, slot_heated, most=None) -> ContactCount:
+def _count(extra, heated, most=None) -> ContactCount:
     """The count with the contact times since the last thermal step added (steps)."""
-    return ContactCount(*(c + p for c, p in
-                          zip(extra.count, _pending(extra, slot_heated, most))))
+    return ContactCount(*(c + p for c, p in zip(extra.count, _pending(extra, heated, most))))
 
 
 def recorded_times(extra):
@@ -384,7 +387,7 @@ def contact_count(extra, wall_heated) -> ContactCount:
     """The contact time of all particle pairs and of all particle-heated-wall contacts since
     :func:`reset_count`, s (``wall_heated`` (n_walls,) as for :func:`make_thermal_update`)."""
     return ContactCount(*(c * extra.dt for c in
-                          _count(extra, _slot_heated(wall_heated, extra.T.shape[-1]))))
+                          _count(extra, _heated_weights(wall_heated))))
 
 
 def reset_record(extra):
@@ -400,7 +403,7 @@ def reset_record(extra):
 def reset_count(extra, wall_heated):
     """``extra`` with the contact time summed over the output interval (:func:`contact_count`)
     set to zero, as :func:`reset_record`."""
-    pending = _pending(extra, _slot_heated(wall_heated, extra.T.shape[-1]))
+    pending = _pending(extra, _heated_weights(wall_heated))
     return extra.replace(count=ContactCount(*(-p for p in pending)))
 
 

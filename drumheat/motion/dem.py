@@ -28,6 +28,7 @@ checked after every chunk (an overflow redoes it with larger buffers).
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import equinox as eqx
@@ -258,6 +259,7 @@ class DEMBed(DEMMotion):
         self.dem = self.make_dem(model)
         self._packing = None
         self._batched = None
+        self._start_in_place = None  # chunk_start, jitted with the state donated
 
     # -- set-up ---------------------------------------------------------------------------------
     def model(self, params=None):
@@ -319,12 +321,12 @@ class DEMBed(DEMMotion):
         return int(round((t1 - t0) / unit))
 
     def _start(self, state, t0):
-        """The state a chunk starts from: recording accumulators and the overlap monitor
-        cleared, and the contact-time count at the start of an output interval."""
-        extra = reset_record(state.extra)
-        if np.any(np.isclose(self.t_out, t0, rtol=0, atol=1e-9 * self.dt)):
-            extra = reset_count(extra, self.wall_heated)
-        return state._replace(extra=extra, max_overlap=jnp.zeros_like(state.max_overlap))
+        """The state a chunk starts from (:func:`chunk_start`)."""
+        return chunk_start(state, self._at_output(t0), self.wall_heated)
+
+    def _at_output(self, t0) -> bool:
+        """Whether ``t0`` is an output time (where the contact-time count starts anew)."""
+        return bool(np.any(np.isclose(self.t_out, t0, rtol=0, atol=1e-9 * self.dt)))
 
     def advance(self, state, t0, t1):
         if isinstance(state, dict):  # the cyclic replay after dem.replay_after
@@ -341,7 +343,17 @@ class DEMBed(DEMMotion):
     def advance_in_place(self, state, t0, t1):
         if not self.advances_in_place(state):
             return self.advance(state, t0, t1)
-        return self.dem.run_steps_in_place(self._start(state, t0), self._steps(t0, t1, self.dt))
+        # the start made in the buffers of `state` too: its cleared accumulators would
+        # otherwise be new arrays, and the caller's old ones (one int32 per pair slot and per
+        # wall slot) would stay alive through the chunk. keep_unused: the old accumulators,
+        # which the start does not read, are donated too (XLA would drop them as unused
+        # inputs, and JAX donates only the inputs it passes)
+        if self._start_in_place is None:
+            self._start_in_place = jax.jit(partial(chunk_start, wall_heated=self.wall_heated),
+                                           static_argnums=1, donate_argnums=0,
+                                           keep_unused=True)
+        start = self._start_in_place(state, self._at_output(t0))
+        return self.dem.run_steps_in_place(start, self._steps(t0, t1, self.dt))
 
     def start_log(self, state, params=None, spool=None):
         rec = None
@@ -360,7 +372,7 @@ class DEMBed(DEMMotion):
             ex = jax.device_get(state.extra)
             log["recorder"].add(np.asarray(state.nbrs.idx), ex, np.asarray(state.position))
         if self._switches_at(t):
-            state, log = self._switch_to_replay(state, log)
+            state, log = self._switch_to_replay(state, log, release=True)
         return state, log
 
     def _switches_at(self, t) -> bool:
@@ -392,20 +404,27 @@ class DEMBed(DEMMotion):
         return dict(super().checkpoint_meta(state),
                     phase="replay" if isinstance(state, dict) else "dem")
 
-    def _switch_to_replay(self, state, log):
-        """Continue by cyclic replay of the last ``replay_cycle`` of the recording."""
+    def _switch_to_replay(self, state, log, release: bool = False):
+        """Continue by cyclic replay of the last ``replay_cycle`` of the recording.
+
+        ``release``: free the buffers of the coupled DEM's ``state`` that the replay does not
+        take over (:func:`release_mechanics`) before the replay is assembled (the run loop,
+        which calls this from :meth:`between`, still holds ``state``)."""
         cfg = self.scene.dem
         cycle = cfg.replayed_cycle
         rec = log["recorder"]
         n_rec = len(rec.pair_ptr) - 1
-        recording = Recording(rec.arrays(first=n_rec - int(round(cycle / cfg.record_interval))))
         model = eqx.combine(state.extra.model, self._skeleton)
+        T, Q = state.extra.T, state.extra.Q
+        if release:
+            release_mechanics(state)
+        recording = Recording(rec.arrays(first=n_rec - int(round(cycle / cfg.record_interval))))
         g0 = recording.n_intervals  # the first step restarts the cycle
         log = dict(log, recording=recording, g0=g0)
         # the recording travels in the state as host data (no array leaves: a checkpoint holds
         # T, Q and g only); each chunk puts its own intervals on the device
-        return {"model": model, "T": state.extra.T, "Q": state.extra.Q,
-                "g": jnp.asarray(g0, jnp.int64), "recording": recording}, log
+        return {"model": model, "T": T, "Q": Q, "g": jnp.asarray(g0, jnp.int64),
+                "recording": recording}, log
 
     def observe(self, state) -> dict:
         if isinstance(state, dict):
@@ -570,6 +589,30 @@ class DEMBed(DEMMotion):
             except DEMError as err:
                 raise type(err)(f"variant {v}: {err}", err.state) from None
         return None
+
+
+def chunk_start(state: DEMState, at_output: bool, wall_heated) -> DEMState:
+    """The state a chunk starts from: the recording's accumulators
+    (:func:`~drumheat.motion.coupling.reset_record`) and the overlap monitor cleared, and at the
+    start of an output interval (``at_output``) the contact-time count
+    (:func:`~drumheat.motion.coupling.reset_count`; ``wall_heated`` (n_walls,) bool)."""
+    extra = reset_record(state.extra)
+    if at_output:
+        extra = reset_count(extra, wall_heated)
+    return state._replace(extra=extra, max_overlap=jnp.zeros_like(state.max_overlap))
+
+
+def release_mechanics(state: DEMState) -> None:
+    """Free the device buffers of ``state`` but those of its temperatures, heat account and
+    thermal parameters (``extra.T``, ``extra.Q``, ``extra.model``), which the cyclic replay
+    takes over: the positions, velocities, neighbour list, springs and contact-time
+    accumulators (about 0.5 kB per particle in float64). ``state`` is unusable afterwards;
+    arrays made from it on the host (``jax.device_get``) stay valid."""
+    ex = state.extra
+    keep = {id(x) for x in jax.tree_util.tree_leaves((ex.T, ex.Q, ex.model))}
+    for x in jax.tree_util.tree_leaves(state):
+        if isinstance(x, jax.Array) and id(x) not in keep and not x.is_deleted():
+            x.delete()
 
 
 def _values(tree) -> tuple:

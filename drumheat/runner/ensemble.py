@@ -58,6 +58,7 @@ import pandas as pd
 from drumheat.motion import AbstractMotion, make_motion
 from drumheat.results.result import make_result
 from drumheat.runner.compile_cache import enable_compilation_cache
+from drumheat.runner.host_memory import return_large_buffers
 from drumheat.runner.loop import MAX_REDO, output_flags, run
 from drumheat.runner.progress import SimProgress
 from drumheat.runner.sharding import (make_mesh, pad_to_multiple, resolve_devices, shard_batch,
@@ -275,6 +276,7 @@ def run_ensemble(scene: Scene | str, overrides, *, devices=None, progress: bool 
     ensemble of the same structure does not compile again.
     """
     enable_compilation_cache()
+    return_large_buffers()
     variants = expand_overrides(overrides)
     start = time.perf_counter()
     if isinstance(scene, Scene):

@@ -31,6 +31,7 @@ from drumheat.results.files import CHECKPOINT, RunFolder, check_out_dir
 from drumheat.results.result import Result, make_result
 from drumheat.runner.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from drumheat.runner.compile_cache import enable_compilation_cache
+from drumheat.runner.host_memory import return_large_buffers
 from drumheat.runner.progress import SimProgress
 from drumheat.runner.sharding import make_mesh, resolve_devices, shard_particles
 from drumheat.runner.spill import StartSpill, copy_leaves
@@ -383,7 +384,9 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
 
     Compiled programs are kept in JAX's persistent compilation cache
     (:mod:`drumheat.runner.compile_cache`; ``DRUMHEAT_CACHE_DIR=off`` leaves it alone), so
-    running the same scene again does not compile again.
+    running the same scene again does not compile again. On Linux with glibc, freed buffers of
+    1 MiB and more go back to the system from the first run on
+    (:mod:`drumheat.runner.host_memory`; a ``MALLOC_MMAP_THRESHOLD_`` set by the user is kept).
 
     Parameters
     ----------
@@ -425,6 +428,7 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
         Formats (png, pdf, svg) and PNG resolution of the figures written into ``out``.
     """
     enable_compilation_cache()
+    return_large_buffers()
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
@@ -457,9 +461,9 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     if out is None:
         traj = simulate(motion, params, progress, mesh)
         return make_result(scene, traj, time.perf_counter() - start)
-    particles = thermal_particles(scene, scene_values(scene))
-    folder = RunFolder(out, scene, resume=resume, mass=np.asarray(particles.mass),
-                       group=group_index(scene))
+    # the masses alone, copied to the host (no device array of the thermal particles is kept)
+    mass = np.array(thermal_particles(scene, scene_values(scene)).mass, copy=True)
+    folder = RunFolder(out, scene, resume=resume, mass=mass, group=group_index(scene))
     offset = float(checkpoint["meta"].get("wall_time_s", 0.0)) if checkpoint else 0.0
     monitor = FolderMonitor(folder, scene, wall_offset=offset)
     with _stop_on_ctrl_c():
