@@ -107,30 +107,37 @@ def test_the_estimate_warms_up_in_place_on_the_runs_own_chunk():
 
 
 @cpu_only
-def test_an_overflow_in_place_is_redone_from_the_spill(tmp_path, monkeypatch):
-    """The initial neighbour list one multiple of slots long: the first chunk overflows, its
-    start comes back from the file, and the chunk is redone with larger buffers, as a run
-    without a folder redoes it from the start it kept in memory."""
-    cls = MOTIONS["dem"]
-    original = cls.initial_state
-
-    def tiny(self, params=None):
-        state = original(self, params)
-        return self.dem.reallocate(state, pair_capacity=1)
-
-    monkeypatch.setattr(cls, "initial_state", tiny)
+def test_a_failed_chunk_in_place_is_redone_from_the_spill(tmp_path, monkeypatch):
+    """The first chunk fails its check (as a neighbour-list overflow does): its start comes
+    back from the file and the chunk is redone from it, as a run without a folder redoes it
+    from the start it kept in memory; the same numbers as a run whose chunks all pass."""
     scene = dem_scene()
     ref = dh.run(scene, progress=False)
-    loads = {"n": 0}
+    cls = MOTIONS["dem"]
+    passes, check = cls.passes, cls.check
+    calls = {"passes": 0, "redo": 0, "loads": 0}
+
+    def fails_once(self, new):
+        calls["passes"] += 1
+        return passes(self, new) and calls["passes"] > 1
+
+    def redo_once(self, start, end, attempt=0):
+        if calls["redo"] == 0:  # the first chunk is redone from its start, unchanged
+            calls["redo"] += 1
+            return start
+        return check(self, start, end, attempt)
+
     load = StartSpill.load
 
     def counted(self):
-        loads["n"] += 1
+        calls["loads"] += 1
         return load(self)
 
+    monkeypatch.setattr(cls, "passes", fails_once)
+    monkeypatch.setattr(cls, "check", redo_once)
     monkeypatch.setattr(StartSpill, "load", counted)
     res = dh.run(scene, out=tmp_path / "run", progress=False)
-    assert loads["n"] >= 1
+    assert calls["loads"] == 1 and calls["redo"] == 1
     assert_identical(res, ref)
 
 

@@ -133,9 +133,11 @@ def simulate(motion: AbstractMotion, params: dict | None = None,
             try:
                 if spill is not None and motion.advances_in_place(state):
                     spill.save(state)
-                    if not spill.owns(state):  # drop the loop's references, then read it back
+                    if not spill.owns(state):  # copied leaf by leaf as the loop lets go of it
+                        leaves, treedef = jax.tree_util.tree_flatten(state)
                         state = new = None
-                        state = spill.load()
+                        state = jax.tree_util.tree_unflatten(treedef, copy_leaves(leaves))
+                        del leaves
                 new = advance_checked(motion, state, t0, t1, spill)
                 if is_output[i + 1]:
                     rows.append(jax.device_get(motion.observe(new)))

@@ -14,7 +14,6 @@ thousands of steps).
 
 from __future__ import annotations
 
-import gc
 import shutil
 import weakref
 from pathlib import Path
@@ -23,18 +22,27 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["StartSpill", "copy_leaves"]
+__all__ = ["StartSpill", "copy_leaves", "own_copy"]
 
 #: the folder in the run's log directory that holds the start of the running chunk
 SPILL_DIR = "chunk-start"
 
 
+def own_copy(x) -> jax.Array:
+    """A copy of the array ``x`` (a JAX or numpy array) on the default device, in a buffer of
+    its own (one a donation may take)."""
+    return jax.block_until_ready(jnp.array(x, copy=True))
+
+
 def copy_leaves(leaves: list) -> list:
-    """Each array of ``leaves`` replaced by a copy in a buffer of its own (one a donation may
-    take), one at a time and in the list itself, so that an original no one else holds is freed
-    before the next is copied. Returns ``leaves``."""
+    """Each array of ``leaves`` replaced by :func:`own_copy`, one at a time and in the list
+    itself, so that an original no one else holds is freed before the next is copied. Returns
+    ``leaves``. A caller that copies a state this way drops its own references to the state
+    first and keeps only the list (``leaves, treedef = jax.tree_util.tree_flatten(state)``,
+    then ``jax.tree_util.tree_unflatten(treedef, copy_leaves(leaves))``): one state in memory,
+    and one array more."""
     for k in range(len(leaves)):
-        leaves[k] = jax.block_until_ready(jnp.array(leaves[k], copy=True))
+        leaves[k] = own_copy(leaves[k])
     return leaves
 
 
@@ -50,7 +58,8 @@ class StartSpill:
     :meth:`save` writes a state before its chunk; :meth:`load` reads it back onto the default
     device (the same tree, shapes and dtypes); :meth:`owns` tells whether a state's buffers are
     the loop's own, as donation needs (the state a chunk ended with, :meth:`adopt`); any other
-    is read back from the files just written, so that the caller's arrays are never donated.
+    is copied into buffers of its own (:func:`copy_leaves`), so that the caller's arrays are
+    never donated.
     """
 
     def __init__(self, folder):
@@ -77,23 +86,21 @@ class StartSpill:
     def load(self):
         """The state last saved, on the default device, in buffers of its own.
 
-        Each file is mapped and copied into a new buffer: no second copy of an array in the
-        process's own memory (the mapped pages are the file's, which the system can drop), and
-        the mappings are released before this returns."""
+        The files are read one at a time, each into memory and from there into its new buffer,
+        so that besides the state only one array is read at a time (mapping the files instead,
+        all of their pages stayed resident until the last was copied)."""
         if self._treedef is None:
             raise RuntimeError("no state has been saved")
-        # copied into buffers of their own (jax.device_put of a mapped array on the CPU keeps
-        # the mapping as the buffer)
-        leaves = copy_leaves([np.load(self.path / f"{k}.npy", mmap_mode="r", allow_pickle=False)
-                              for k in range(self._treedef.num_leaves)])
-        gc.collect()  # the copies leave references to the mappings in cycles: unmap them now
+        leaves = [own_copy(np.load(self.path / f"{k}.npy", allow_pickle=False))
+                  for k in range(self._treedef.num_leaves)]
         return jax.tree_util.tree_unflatten(self._treedef, leaves)
 
     def owns(self, state) -> bool:
         """Whether the arrays of ``state`` are those a chunk returned (:meth:`adopt`), which no
         one else holds; any other state (the initial one, one that the host-side work between
-        chunks rebuilt, a restored one) is to be read back from the files (:meth:`load`), after
-        the caller has dropped it, before its buffers may be donated."""
+        chunks rebuilt, a restored one) is to be copied into buffers of its own
+        (:func:`copy_leaves`, after the caller has dropped its references) before its buffers
+        may be donated."""
         own = {id(r()) for r in self._own if r() is not None}
         leaves = jax.tree_util.tree_leaves(state)
         return bool(leaves) and all(id(x) in own for x in leaves)
