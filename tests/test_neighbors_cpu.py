@@ -87,6 +87,36 @@ def test_same_pairs_order_and_sources(dim, periodic, dtype, spread, pair_order):
                                   np.where(np.asarray(sb) >= 0, np.asarray(sb) + 1.0, 0.0))
 
 
+@pytest.mark.parametrize("dim,periodic,dtype,spread,pair_order", [
+    (2, None, np.float32, 1.0, "index"), (3, 0.12, np.float64, 1.0, "index"),
+    (3, None, np.float64, 1.6, "index"), (2, None, np.float64, 1.0, "cell"),
+    (3, 0.12, np.float32, 1.0, "cell"), (3, None, np.float64, 1.6, "cell")])
+def test_allocate_is_the_jax_allocation(dim, periodic, dtype, spread, pair_order):
+    """A list allocated by the C++ build (two passes: the count and the fullest cell, then the
+    list) has the capacities, pairs, order and flags of the JAX build's; so does the count."""
+    rng = np.random.default_rng(7 + dim + int(spread * 10))
+    n = 2500
+    lo, hi = np.full(dim, -0.15), np.full(dim, 0.15)
+    if periodic:
+        lo[-1], hi[-1] = 0.0, periodic
+    pos = jnp.asarray(rng.uniform(lo, hi, (n, dim)) * spread, dtype)
+    if periodic:
+        pos = pos.at[:, -1].set(jnp.mod(pos[:, -1], periodic))
+    jx, cp = _setups(dim, periodic, lo, hi, pair_order=pair_order)
+    for floor in ({}, {"min_capacity": 9000, "min_cell_capacity": 60}):
+        a, b = jx.allocate(pos, **floor), cp.allocate(pos, **floor)
+        assert (a.max_occupancy, a.cell_list_capacity) == (b.max_occupancy, b.cell_list_capacity)
+        assert int(a.error.code) == int(b.error.code) == 0
+        assert int(jnp.sum(b.idx[0] < n)) > 300  # a real list
+        for x, y in ((a.idx, b.idx), (a.reference_position, b.reference_position)):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        if pair_order == "index":
+            assert a.order is None and b.order is None
+        else:
+            np.testing.assert_array_equal(np.asarray(a.order), np.asarray(b.order))
+    assert jx.count_pairs(pos) == cp.count_pairs(pos) > 300
+
+
 @pytest.mark.parametrize("pair_order", ["index", "cell"])
 def test_rebuild_and_carry_in_the_old_buffers(pair_order):
     """A rebuild whose old list is donated writes the new list into its buffer, and

@@ -474,18 +474,55 @@ class NeighborSetup:
         x the fullest cell, and at least ``min_cell_capacity``.
         """
         pos = self.to_box(position)
-        fullest = int(_fullest_cell(self.grid, pos))
+        if self.builder == "cpu":
+            count, fullest = self._cpu_count(pos)
+        else:
+            fullest = int(_fullest_cell(self.grid, pos))
         cell_cap = max(int(min_cell_capacity), int(fullest * self.capacity_multiplier), 1)
-        count, _ = _count_pairs(self.grid, pos, cell_cap)
+        if self.builder != "cpu":
+            count = int(_count_pairs(self.grid, pos, cell_cap)[0])
         target = round_length(
-            max(int(min_capacity), int(int(count) * self.capacity_multiplier) + 1, 1))
+            max(int(min_capacity), int(count * self.capacity_multiplier) + 1, 1))
+        if self.builder == "cpu":
+            return self._cpu_list(pos, target, cell_cap)
         return self._list(pos, _build(self.grid, pos, target, cell_cap),
                           ListError(jnp.zeros((), jnp.uint8)), cell_cap)
 
     def count_pairs(self, position):
         """Number of pairs within the cutoff at ``position`` (host-side, for sizing buffers)."""
         pos = self.to_box(position)
+        if self.builder == "cpu":
+            return self._cpu_count(pos)[0]
         return int(_count_pairs(self.grid, pos, max(int(_fullest_cell(self.grid, pos)), 1))[0])
+
+    def _cpu_build(self, pos, capacity: int, cell_capacity: int, ranked: bool = False):
+        """The C++ build (:func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`) of a list with
+        ``capacity`` slots at box-frame ``pos``, without an old list (every source -1)."""
+        from drumheat.mechanics.cpu_kernel import neighbor_pairs
+
+        g = self.grid
+        none = jnp.full((2, 0), pos.shape[0], jnp.int32)
+        return neighbor_pairs(pos, none, capacity, g.cells, g.cell_size, g.cutoff,
+                              self.periodic_length, cell_capacity, ranked=ranked)
+
+    def _cpu_count(self, pos) -> tuple[int, int]:
+        """``(pairs within the cutoff, fullest cell)`` at box-frame ``pos`` by a C++ build
+        without slots (the JAX count gathers candidates of the surrounding cells at once, about
+        0.4 kB per particle of XLA temporaries)."""
+        _, _, total, fullest, _ = self._cpu_build(pos, 0, pos.shape[0])
+        return int(total), int(fullest)
+
+    def _cpu_list(self, pos, capacity: int, cell_capacity: int) -> NeighborList:
+        """The list of :meth:`allocate` built in C++: the pairs and their order of
+        :meth:`_list`'s (``tests/test_neighbors_cpu.py``), without the JAX build's
+        temporaries."""
+        idx, _, total, fullest, order = self._cpu_build(pos, capacity, cell_capacity,
+                                                        ranked=not self.index_order)
+        error = ListError(jnp.zeros((), jnp.uint8))
+        error = error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > capacity)
+        error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > cell_capacity)
+        return NeighborList(idx, pos, error, None if self.index_order else order,
+                            int(cell_capacity), int(capacity), self.cutoff)
 
     def rebuild(self, position, nbrs):
         """Rebuild the list at ``position`` with the existing capacities (jittable); the
