@@ -507,8 +507,8 @@ class NeighborSetup:
 
     def _cpu_count(self, pos) -> tuple[int, int]:
         """``(pairs within the cutoff, fullest cell)`` at box-frame ``pos`` by a C++ build
-        without slots (the JAX count gathers candidates of the surrounding cells at once, about
-        0.4 kB per particle of XLA temporaries)."""
+        without slots (the JAX count gathers the candidates of the surrounding cells at once,
+        in XLA temporaries that grow with N: docs/performance.md)."""
         _, _, total, fullest, _ = self._cpu_build(pos, 0, pos.shape[0])
         return int(total), int(fullest)
 

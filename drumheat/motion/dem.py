@@ -606,8 +606,8 @@ def release_mechanics(state: DEMState) -> None:
     """Free the device buffers of ``state`` but those of its temperatures, heat account and
     thermal parameters (``extra.T``, ``extra.Q``, ``extra.model``), which the cyclic replay
     takes over: the positions, velocities, neighbour list, springs and contact-time
-    accumulators (about 0.5 kB per particle in float64). ``state`` is unusable afterwards;
-    arrays made from it on the host (``jax.device_get``) stay valid."""
+    accumulators, nearly all of the state. ``state`` is unusable afterwards; arrays made from it
+    on the host (``jax.device_get``) stay valid."""
     ex = state.extra
     keep = {id(x) for x in jax.tree_util.tree_leaves((ex.T, ex.Q, ex.model))}
     for x in jax.tree_util.tree_leaves(state):
