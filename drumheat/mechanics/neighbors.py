@@ -423,8 +423,7 @@ class NeighborSetup:
         overflows added to ``error``, pairs in canonical order."""
         idx, total, fullest = built
         capacity = idx.shape[1]
-        error = error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > capacity)
-        error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > cell_capacity)
+        error = _flag_overflows(error, total, capacity, fullest, cell_capacity)
         order = self.layout_order(pos, idx) if self.pair_order == "cell" else None
         return sort_pairs(NeighborList(idx, pos, error, order, int(cell_capacity),
                                        int(capacity), self.cutoff), pos.shape[0], order)
@@ -474,19 +473,18 @@ class NeighborSetup:
         x the fullest cell, and at least ``min_cell_capacity``.
         """
         pos = self.to_box(position)
+        cells = lambda fullest: max(  # noqa: E731
+            int(min_cell_capacity), int(fullest * self.capacity_multiplier), 1)
+        slots = lambda count: round_length(  # noqa: E731
+            max(int(min_capacity), int(count * self.capacity_multiplier) + 1, 1))
+        fresh = ListError(jnp.zeros((), jnp.uint8))
         if self.builder == "cpu":
             count, fullest = self._cpu_count(pos)
-        else:
-            fullest = int(_fullest_cell(self.grid, pos))
-        cell_cap = max(int(min_cell_capacity), int(fullest * self.capacity_multiplier), 1)
-        if self.builder != "cpu":
-            count = int(_count_pairs(self.grid, pos, cell_cap)[0])
-        target = round_length(
-            max(int(min_capacity), int(count * self.capacity_multiplier) + 1, 1))
-        if self.builder == "cpu":
-            return self._cpu_list(pos, target, cell_cap)
-        return self._list(pos, _build(self.grid, pos, target, cell_cap),
-                          ListError(jnp.zeros((), jnp.uint8)), cell_cap)
+            no_pairs = jnp.full((2, 0), pos.shape[0], jnp.int32)
+            return self._cpu_list(pos, no_pairs, slots(count), cells(fullest), fresh)[0]
+        cell_cap = cells(int(_fullest_cell(self.grid, pos)))
+        target = slots(int(_count_pairs(self.grid, pos, cell_cap)[0]))
+        return self._list(pos, _build(self.grid, pos, target, cell_cap), fresh, cell_cap)
 
     def count_pairs(self, position):
         """Number of pairs within the cutoff at ``position`` (host-side, for sizing buffers)."""
@@ -495,34 +493,33 @@ class NeighborSetup:
             return self._cpu_count(pos)[0]
         return int(_count_pairs(self.grid, pos, max(int(_fullest_cell(self.grid, pos)), 1))[0])
 
-    def _cpu_build(self, pos, capacity: int, cell_capacity: int, ranked: bool = False):
-        """The C++ build (:func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`) of a list with
-        ``capacity`` slots at box-frame ``pos``, without an old list (every source -1)."""
-        from drumheat.mechanics.cpu_kernel import neighbor_pairs
-
-        g = self.grid
-        none = jnp.full((2, 0), pos.shape[0], jnp.int32)
-        return neighbor_pairs(pos, none, capacity, g.cells, g.cell_size, g.cutoff,
-                              self.periodic_length, cell_capacity, ranked=ranked)
-
     def _cpu_count(self, pos) -> tuple[int, int]:
         """``(pairs within the cutoff, fullest cell)`` at box-frame ``pos`` by a C++ build
         without slots (the JAX count gathers the candidates of the surrounding cells at once,
         in XLA temporaries that grow with N: docs/performance.md)."""
-        _, _, total, fullest, _ = self._cpu_build(pos, 0, pos.shape[0])
+        from drumheat.mechanics.cpu_kernel import neighbor_pairs
+
+        g, n = self.grid, pos.shape[0]
+        _, _, total, fullest, _ = neighbor_pairs(
+            pos, jnp.full((2, 0), n, jnp.int32), 0, g.cells, g.cell_size, g.cutoff,
+            self.periodic_length, n)
         return int(total), int(fullest)
 
-    def _cpu_list(self, pos, capacity: int, cell_capacity: int) -> NeighborList:
-        """The list of :meth:`allocate` built in C++: the pairs and their order of
-        :meth:`_list`'s (``tests/test_neighbors_cpu.py``), without the JAX build's
-        temporaries."""
-        idx, _, total, fullest, order = self._cpu_build(pos, capacity, cell_capacity,
-                                                        ranked=not self.index_order)
-        error = ListError(jnp.zeros((), jnp.uint8))
-        error = error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > capacity)
-        error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > cell_capacity)
-        return NeighborList(idx, pos, error, None if self.index_order else order,
-                            int(cell_capacity), int(capacity), self.cutoff)
+    def _cpu_list(self, pos, old_idx, capacity: int, cell_capacity: int, error):
+        """``(list, source)``: the list of ``capacity`` slots at box-frame ``pos`` built in C++
+        (:func:`drumheat.mechanics.cpu_kernel.neighbor_pairs`; the pairs and their order of
+        :meth:`_list`'s, ``tests/test_neighbors_cpu.py``), its overflows added to ``error``,
+        and each slot's slot in ``old_idx`` (2, M_old) or -1."""
+        from drumheat.mechanics.cpu_kernel import neighbor_pairs
+
+        g = self.grid
+        idx, src, total, fullest, order = neighbor_pairs(
+            pos, old_idx, capacity, g.cells, g.cell_size, g.cutoff, self.periodic_length,
+            cell_capacity, ranked=not self.index_order)
+        return NeighborList(idx, pos, _flag_overflows(error, total, capacity, fullest,
+                                                      cell_capacity),
+                            None if self.index_order else order, int(cell_capacity),
+                            int(capacity), self.cutoff), src
 
     def rebuild(self, position, nbrs):
         """Rebuild the list at ``position`` with the existing capacities (jittable); the
@@ -540,17 +537,8 @@ class NeighborSetup:
             new = self.rebuild(position, nbrs)
             return new, pair_sources(nbrs.idx, new.idx, position.shape[0],
                                      old_sorted=nbrs.order is None)
-        from drumheat.mechanics.cpu_kernel import neighbor_pairs
-
-        pos = self.to_box(position)
-        g = self.grid
-        idx, src, total, fullest, order = neighbor_pairs(
-            pos, nbrs.idx, nbrs.max_occupancy, g.cells, g.cell_size, g.cutoff,
-            self.periodic_length, nbrs.cell_list_capacity, ranked=not self.index_order)
-        error = nbrs.error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > nbrs.max_occupancy)
-        error = error.update(PEC.CELL_LIST_OVERFLOW, fullest > nbrs.cell_list_capacity)
-        return NeighborList(idx, pos, error, None if self.index_order else order,
-                            nbrs.cell_list_capacity, nbrs.max_occupancy, self.cutoff), src
+        return self._cpu_list(self.to_box(position), nbrs.idx, nbrs.max_occupancy,
+                              nbrs.cell_list_capacity, nbrs.error)
 
     def take_pairs(self, data, source):
         """Per-pair data (M, ...) carried to a list rebuilt by :meth:`rebuild_with_sources`
@@ -589,6 +577,13 @@ def dense_bed_pairs(radius, cutoff: float, dim: int) -> float:
     r = np.asarray(radius, float).reshape(-1)
     mean = 0.5 * (DENSE_FRACTION[dim] * float(cutoff) ** dim / float(np.mean(r**dim)) - 1.0)
     return max(mean, 3.0) if dim == 2 else mean
+
+
+def _flag_overflows(error, total, capacity: int, fullest, cell_capacity: int):
+    """``error`` with the overflows of a build flagged: more pairs found (``total``) than the
+    list has slots, more particles in one cell (``fullest``) than the cell capacity."""
+    error = error.update(PEC.NEIGHBOR_LIST_OVERFLOW, total > capacity)
+    return error.update(PEC.CELL_LIST_OVERFLOW, fullest > cell_capacity)
 
 
 @partial(jax.jit, static_argnums=0)

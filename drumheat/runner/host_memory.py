@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import functools
 import os
 import sys
 
@@ -33,9 +34,7 @@ MMAP_THRESHOLD = 1 << 20
 #: glibc's mallopt parameter number of M_MMAP_THRESHOLD (malloc.h)
 _M_MMAP_THRESHOLD = -3
 
-_done: list[bool] = []  # the outcome of the first call (idempotent)
-
-
+@functools.cache  # once per process: the first call's outcome holds
 def return_large_buffers() -> bool:
     """Fix glibc's mmap threshold at :data:`MMAP_THRESHOLD` for this process (idempotent).
 
@@ -43,9 +42,7 @@ def return_large_buffers() -> bool:
     where ``mallopt`` refuses, or where ``MALLOC_MMAP_THRESHOLD_`` is set in the environment
     (the user's own setting is kept).
     """
-    if not _done:
-        _done.append(_set_threshold())
-    return _done[0]
+    return _set_threshold()
 
 
 def _set_threshold() -> bool:
