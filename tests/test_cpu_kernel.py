@@ -232,16 +232,19 @@ def test_one_step_equals_the_jax_kernel(dim, dtype, law, tol):
 @pytest.mark.parametrize("dim", [2, 3])
 def test_equal_spheres_of_one_material_pass_one_value(monkeypatch, dim):
     """Radii, masses and moments of inertia that all particles share go to the C++ loop as one
-    value each (``cpu_kernel.uniform_or_all``), the types not at all with one material: the
+    value each (``cpu_kernel.uniform_or_all``; gravity as one row), the types not at all with
+    one material: the
     same forces, torques, springs and heat flows as with the per-particle arrays, bit for bit,
     and the JAX kernel's to round-off."""
     jdem, st = _bed(dim, jnp.float64, "jax", "projected", 0.05, one_material=True)
     cdem, _ = _bed(dim, jnp.float64, "cpu", "projected", 0.05, one_material=True)
     assert [a.shape for a in cdem._forces.__wrapped__.func._kernel_particles] == [(1,)] * 4
+    assert cdem._forces.__wrapped__.func._body_force.shape == (1, dim)  # gravity, one row
     monkeypatch.setattr(cpu_kernel, "uniform_or_all", lambda values: values)
     fdem, _ = _bed(dim, jnp.float64, "cpu", "projected", 0.05, one_material=True)
     n = jdem.particles.n
     assert [a.shape for a in fdem._forces.__wrapped__.func._kernel_particles] == [(n,)] * 3 + [(1,)]
+    assert fdem._forces.__wrapped__.func._body_force.shape == (n, dim)
     a, b, c = _forces(jdem, st), _forces(cdem, st), _forces(fdem, st)
     assert int(jnp.sum(b[4].pair_mask)) > (40 if dim == 2 else 150)
     assert float(jnp.max(jnp.abs(b[1]))) > 0.0  # rolling resistance and spins: inertia read
@@ -355,6 +358,140 @@ def test_threaded_kernel_equals_one_thread(monkeypatch):
     _close(a[0], b[0], 1e-5, "force")
     _close(a[1], b[1], 1e-5, "torque")
     _close(a[6], b[6], 1e-9, "heat flow")
+
+
+@needs_kernel
+@pytest.mark.parametrize("dim,dtype,shuffle", [(3, jnp.float64, False), (2, jnp.float32, True)])
+def test_the_body_force_is_added_last(monkeypatch, dim, dtype, shuffle):
+    """The loop adds the body force (gravity, one row for all particles or one per particle)
+    to each particle's sum of contact forces last: the forces are the loop's without it plus
+    the body force, bit for bit, in one chunk and in three, in the particles' own numbering and
+    in the cell order; nothing else changes."""
+    import dataclasses
+
+    from drumheat.mechanics.integrator import _carry_pairs
+    from drumheat.mechanics.neighbors import sort_pairs
+
+    st = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=shuffle)[1]
+    cdem = _bed(dim, dtype, "cpu", "overlap", 0.05, shuffle=shuffle)[0]
+    f = cdem._forces.__wrapped__.func  # the CpuContactForces of the DEM
+    n = st.position.shape[0]
+    if shuffle:  # the cell order (test_the_cell_order)
+        cells = cdem.neighbor.grid.order(st.nbrs.reference_position)
+        st = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells),
+                          n)
+    geometry = f.wall_geometry(st.position, st.time)
+    rows = jnp.asarray(np.random.default_rng(5).normal(0.0, 1e-3, (n, dim)), dtype)
+
+    def call(body):
+        return cpu_kernel.contacts(
+            st.position, st.velocity, st.angular_velocity, *f._kernel_particles, st.nbrs.idx,
+            st.pair_spring, *geometry, st.wall_spring, **f._kernel_params,
+            temperature=st.extra, conduction_law="overlap", conduction_h=2.0,
+            gap_tolerance=0.05, pair_gap=0.05, order=st.nbrs.order, body_force=body)
+
+    assert f._body_force.shape == (n, dim)  # gravity of two materials: a row per particle
+    for threads in ("1", "3"):
+        monkeypatch.setenv("DRUMHEAT_KERNEL_THREADS", threads)
+        plain = call(None)
+        for body in (f._body_force, rows[:1], rows):
+            out = call(body)
+            np.testing.assert_array_equal(np.asarray(out[0]),
+                                          np.asarray(plain[0] + body))  # as JAX adds it
+            for x, y in zip(out[1:], plain[1:]):
+                np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@needs_kernel
+@pytest.mark.parametrize("dim,dtype,shuffle", [(3, jnp.float64, False), (2, jnp.float32, True)])
+def test_the_coming_steps_skin_test_in_the_call(monkeypatch, dim, dtype, shuffle):
+    """For particles of one mass the C++ loop also makes the skin test of the integrator's
+    coming step (``ahead``): the largest squared displacement from the list's reference
+    positions after the coming step's two half-kicks and drift, from the call's own forces.
+    It equals XLA's loop condition, the same kicks, drift and ``max_displacement_sq`` in JAX,
+    to an ulp (XLA's generated code may fuse the squares' sum into multiply-adds, the loop
+    does not; the kicks, the drift and the displacements themselves are the same bits), in
+    one chunk and in three, in the particles' own numbering and in the cell order; asking for
+    it changes no other output; a class that cannot make it refuses."""
+    import dataclasses
+
+    from drumheat.mechanics.integrator import _carry_pairs, wrap_periodic_axis
+    from drumheat.mechanics.neighbors import sort_pairs
+
+    st = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=shuffle, one_material=True)[1]
+    jdem = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=shuffle, one_material=True)[0]
+    cdem = _bed(dim, dtype, "cpu", "overlap", 0.05, shuffle=shuffle, one_material=True)[0]
+    f, nb, n = cdem._forces.__wrapped__.func, cdem.neighbor, st.position.shape[0]
+    assert f.looks_ahead and not jdem._forces.__wrapped__.func.looks_ahead
+    if shuffle:  # the cell order
+        cells = nb.grid.order(st.nbrs.reference_position)
+        st = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+    # the reference positions a few half-skins behind, so that the test has a spread to find
+    rng = np.random.default_rng(7)
+    ref = st.nbrs.reference_position + jnp.asarray(rng.normal(0.0, 0.3 * nb.skin, (n, dim)), dtype)
+    st = st._replace(nbrs=dataclasses.replace(st.nbrs, reference_position=ref))
+    dt = cdem.dt
+    L = cdem.neighbor.periodic_length
+    inv_m = 1.0 / cpu_kernel.shared_value(f.mass)
+    consts = cpu_kernel.skin_test_constants(dt, inv_m, L, nb.lo, dtype)
+
+    @jax.jit
+    def xla_test(x, v, force, nbrs):  # the loop's condition (integrator.run_segments)
+        half = 0.5 * dt
+        v = v + half * force * inv_m
+        v = v + half * force * inv_m
+        return nb.max_displacement_sq(wrap_periodic_axis(x + dt * v, L, near=True), nbrs)
+
+    call = jax.jit(lambda s, ahead: f(s.position, s.velocity, s.angular_velocity, s.time,
+                                      s.nbrs, s.pair_spring, s.wall_spring,
+                                      temperature=s.extra, ahead=ahead))
+    for threads in ("1", "3"):
+        monkeypatch.setenv("DRUMHEAT_KERNEL_THREADS", threads)
+        plain, looked = call(st, None), call(st, consts)
+        assert plain.ahead is None
+        moved = float(looked.ahead)
+        np.testing.assert_allclose(
+            moved, float(xla_test(st.position, st.velocity, looked.force, st.nbrs)),
+            rtol=2 * float(jnp.finfo(dtype).eps), atol=0)
+        assert moved > (0.5 * nb.skin) ** 2  # a particle past the skin: the test finds it
+        for x, y in zip(jax.tree_util.tree_leaves(plain), jax.tree_util.tree_leaves(looked[:8])):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    with pytest.raises(ValueError, match="no skin test"):
+        jdem._forces.__wrapped__.func(st.position, st.velocity, st.angular_velocity, st.time,
+                                      st.nbrs, st.pair_spring, st.wall_spring, ahead=consts)
+
+
+@needs_kernel
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_loop_with_the_skin_test_in_the_call(monkeypatch, dim):
+    """The integrator's loop between rebuilds with the skin test in the C++ call (particles of
+    one mass) gives the run of the loop that makes the test in XLA bit for bit, through
+    several neighbour rebuilds, and of the step called one by one."""
+    from drumheat.mechanics import forces as forces_mod
+
+    def run(looks, steps=400):
+        init = forces_mod.CpuContactForces.__init__
+
+        def patched(self, *a, **kw):
+            init(self, *a, **kw)
+            self.looks_ahead = self.looks_ahead and looks
+
+        monkeypatch.setattr(forces_mod.CpuContactForces, "__init__", patched)
+        _, st = _bed(dim, jnp.float64, "jax", "projected", 0.05, calm=True, one_material=True)
+        dem = _bed(dim, jnp.float64, "cpu", "projected", 0.05, calm=True, one_material=True)[0]
+        assert dem._forces.__wrapped__.func.looks_ahead == looks
+        return dem, st, dem.run_steps(st, steps)
+
+    dem, st, a = run(True)
+    b = run(False)[2]
+    assert int(a.n_rebuilds) - int(st.n_rebuilds) >= 3
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    c = dem.adopt(st)
+    for _ in range(400):
+        c = dem.step(c)[0]
+    for field in ("position", "velocity", "angular_velocity", "pair_spring", "n_rebuilds"):
+        np.testing.assert_array_equal(np.asarray(getattr(a, field)), np.asarray(getattr(c, field)))
 
 
 @needs_kernel

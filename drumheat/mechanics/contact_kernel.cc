@@ -34,18 +34,36 @@
 //  15 wall angular velocities about z (W) S          16 temperatures (N or 0) f64
 //  17 wall distance before the step (N, W) S (friction heat; else length 0)
 //  18 the particles in the order of their cells (N) s32 (a permutation), or length 0
+//  19 body force (N, D) or (1, D) S, one row for every particle (gravity m g), or length 0
+//  20 the coming step's skin test (see below): c, dt, L, 1 / L, lo_0 .. lo_{D-1} (4 + D) S,
+//     or length 0; 21 the neighbour list's reference positions (N, D) S (with 20)
 // Attributes: dt, L (period of the last axis, 0 = none), law (conduction, < 0 = none), h
 // (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling), fh
 // (1: friction heat), cgap (the gap tolerance of output 11).
-// Outputs: 0 forces (N, D), 1 torques (N, 3) or (N); 2 new pair springs (M, D); 3 overlap,
-// 4 centre distance, 5 normal force per pair (M, or all three of length 0: not written, for a
-// caller that reads none of them); 6 new wall springs (N, W, D); 7 overlap and
-// 8 normal force per wall slot (N, W) (all zero where nothing touches); 9 the largest
-// overlap / radius (smaller radius of a pair) (1); 10 heat flow into each particle (N or 0) f64;
+// Outputs: 0 forces (N, D): the contacts' sum plus the body force (input 19, added last),
+// 1 torques (N, 3) or (N); 2 new pair springs (M, D); 3 overlap, 4 centre distance, 5 normal
+// force per pair (M, or all three of length 0: not written, for a caller that reads none of
+// them); 6 new wall springs (N, W, D); 7 overlap and 8 normal force per wall slot (N, W)
+// (all zero where nothing touches); 9 the largest overlap / radius (smaller radius of a pair)
+// (1); 10 heat flow into each particle (N or 0) f64;
 // 11 whether each pair conducts (M) pred: it overlaps, or its surface gap |d| - r_i - r_j is at
 // most cgap min(d_i, d_j) (the pair_conducts of forces.ContactForces.pair_gap_mask); friction
 // heat (length 0 without fh): 12 pair rows (M, KP) S, 13 wall rows (N W, KW) S, 14 the losses
-// at the continuous rates (3) f64.
+// at the continuous rates (3) f64; 15 the coming step's largest squared displacement (1) S
+// (length 0 without input 20).
+//
+// The coming step's skin test (inputs 20, 21; integrator.run_segments): the loop that steps
+// between neighbour rebuilds tests, before each step, whether the step's drift takes a particle
+// more than half the skin from where the list was built. The velocities of this call are the
+// half-step ones; with the forces F of the call (body force included) the coming step's are
+// v' = (v + c F) + c F (this step's second half-kick and the coming step's first, c = dt / (2 m)
+// for particles of one mass), its positions x' = x + dt v' with the periodic last axis (L > 0)
+// brought back into [0, L) by one period, and output 15 is the largest |x' - lo - x_ref|^2
+// (minimum image along the periodic axis, dz - L round(dz / L), the rounding to even as
+// jnp.round, with dz / L taken as dz (1 / L) as XLA computes it): the arithmetic of the
+// loop's condition in XLA (the same velocities, positions and displacements; the sum of the
+// squares may differ by an ulp where XLA's code fuses it into multiply-adds), in the pass
+// that adds the chunks' forces, where F is at hand.
 //
 // Contact conduction (optional, law >= 0; drumheat/mechanics/conduction.py): the heat flow into
 // each particle Q_i = sum_j g_ij (T_j - T_i) over the conducting pairs, g = h pi min(r_i, r_j)^2
@@ -651,6 +669,14 @@ struct Call {
   int64_t r_step = 1, ms_step = 1, in_step = 1;
   const int32_t *pt, *P, *order;  // order: null, or the particles in the order of their cells
   const double* temp;
+  // body: null, or the body force added to each particle's force, one row per particle
+  // (body_step D) or one for all (body_step 0)
+  const void* body = nullptr;
+  int64_t body_step = 0;
+  // ahead: null, or the constants of the coming step's skin test (input 20) and ref the
+  // reference positions (input 21); AH its output
+  const void *ahead = nullptr, *ref = nullptr;
+  void* AH = nullptr;
   void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX, *PW, *WW;
   double *Q, *R;
   bool* CD;
@@ -1034,6 +1060,35 @@ std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S
   return buf;
 }
 
+// The coming step's skin test (see the header): moved(i, f) is particle i's squared
+// displacement from its reference position after the coming step's drift, f its force (D).
+template <typename S, int D>
+struct Ahead {
+  bool on;
+  S c = S(0), dt = S(0), L = S(0), inv_L = S(0), lo[D] = {};
+  const S *x, *v, *ref;
+  explicit Ahead(const Call& a)
+      : on(a.ahead != nullptr), x(static_cast<const S*>(a.x)), v(static_cast<const S*>(a.v)),
+        ref(static_cast<const S*>(a.ref)) {
+    if (!on) return;
+    const S* k = static_cast<const S*>(a.ahead);
+    c = k[0]; dt = k[1]; L = k[2]; inv_L = k[3];
+    for (int q = 0; q < D; ++q) lo[q] = k[4 + q];
+  }
+  S moved(int64_t i, const S* f) const {
+    S s = S(0);
+    for (int q = 0; q < D; ++q) {
+      const S u = (v[D*i + q] + f[q] * c) + f[q] * c;  // the two half-kicks
+      S y = x[D*i + q] + u * dt;
+      if (q == D - 1 && L > S(0)) y = y >= L ? y - L : (y < S(0) ? y + L : y);
+      S d = (y - lo[q]) - ref[D*i + q];
+      if (q == D - 1 && L > S(0)) d = d - std::nearbyint(d * inv_L) * L;
+      s = q ? s + d * d : d * d;
+    }
+    return s;
+  }
+};
+
 template <typename S, int D>
 bool run(ffi::ThreadPool& pool, const Call& a) {
   constexpr int DW = Loop<S, D>::DW;
@@ -1094,16 +1149,31 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   S max_ov = mx[0];
   for (int64_t c = 1; c < nc; ++c)
     if (mx[c] > max_ov) max_ov = mx[c];
+  const S* body = static_cast<const S*>(a.body);
+  const int64_t bs = a.body_step;
+  const Ahead<S, D> ahead(a);
+  std::vector<S> far(nc, S(0));  // each range's largest squared displacement (skin test)
   if (!ranked) {
-    for (int64_t c = 1; c < nc; ++c) {
-      const double* b = acc[c - 1]->data();
-      const S* f = reinterpret_cast<const S*>(b);
-      for (int64_t q = 0; q < D * n; ++q) F0[q] += f[q];
-      for (int64_t q = 0; q < DW * n; ++q) T0[q] += f[D * n + q];
-      if (heat_on)
-        for (int64_t q = 0; q < n; ++q) Q0[q] += b[fs + q];
-      for (int q = 0; q < 3; ++q) R0[q] += b[fs + n + q];
-    }
+    // the other chunks' sums added to chunk 0's, for each value in chunk order, then the body
+    // force (the order of the terms of each sum does not depend on how the particles are cut)
+    for_chunks(pool, nc, [&](int cc) {
+      const int64_t p0 = n*cc/nc, p1 = n*(cc + 1)/nc;
+      for (int64_t c = 1; c < nc; ++c) {
+        const double* b = acc[c - 1]->data();
+        const S* f = reinterpret_cast<const S*>(b);
+        for (int64_t q = D * p0; q < D * p1; ++q) F0[q] += f[q];
+        for (int64_t q = DW * p0; q < DW * p1; ++q) T0[q] += f[D * n + q];
+        if (heat_on)
+          for (int64_t q = p0; q < p1; ++q) Q0[q] += b[fs + q];
+      }
+      if (body)
+        for (int64_t p = p0; p < p1; ++p)
+          for (int k = 0; k < D; ++k) F0[D*p + k] += body[bs*p + k];
+      if (ahead.on)
+        for (int64_t p = p0; p < p1; ++p) far[cc] = std::max(far[cc], ahead.moved(p, F0 + D*p));
+    });
+    for (int64_t c = 1; c < nc; ++c)
+      for (int q = 0; q < 3; ++q) R0[q] += acc[c - 1]->data()[fs + n + q];
   } else {  // the chunks' sums, added in chunk order as above, back in the particles' numbering
     const int32_t* od = a.order;
     for_chunks(pool, nc, [&](int cc) {
@@ -1118,9 +1188,10 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
           for (int k = 0; k < DW; ++k) t[k] = c ? t[k] + g[D*n + DW*p + k] : g[D*n + DW*p + k];
           if (heat_on) q = c ? q + b[fs + p] : b[fs + p];
         }
-        for (int k = 0; k < D; ++k) F0[D*u + k] = f[k];
+        for (int k = 0; k < D; ++k) F0[D*u + k] = body ? f[k] + body[bs*u + k] : f[k];
         for (int k = 0; k < DW; ++k) T0[DW*u + k] = t[k];
         if (heat_on) Q0[u] = q;
+        if (ahead.on) far[cc] = std::max(far[cc], ahead.moved(u, F0 + D*u));
       }
     });
     for (int q = 0; q < 3; ++q) {
@@ -1136,6 +1207,11 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   for (auto& b : acc) give_buffer(std::move(b));
   give_buffer(std::move(packed));
   MX[0] = max_ov;
+  if (ahead.on) {
+    S most = S(0);
+    for (const S d : far) most = std::max(most, d);
+    static_cast<S*>(a.AH)[0] = most;
+  }
   return true;
 }
 
@@ -1225,7 +1301,8 @@ static ffi::Error ContactsImpl(
     ffi::Buffer<ffi::S32> pairs, ffi::AnyBuffer spring, ffi::AnyBuffer wdist, ffi::AnyBuffer wnrm,
     ffi::AnyBuffer wvel, ffi::AnyBuffer wspring, ffi::AnyBuffer tab_pp, ffi::AnyBuffer tab_pw,
     ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, ffi::AnyBuffer wdist0,
-    ffi::Buffer<ffi::S32> order, double dt,
+    ffi::Buffer<ffi::S32> order, ffi::AnyBuffer body, ffi::AnyBuffer ahead, ffi::AnyBuffer ref,
+    double dt,
     double L, int32_t law, double h, double tol, int32_t rot, int32_t fh, double cgap,
     ffi::Result<ffi::AnyBuffer> force, ffi::Result<ffi::AnyBuffer> torque,
     ffi::Result<ffi::AnyBuffer> nspring, ffi::Result<ffi::AnyBuffer> ovl_out,
@@ -1234,17 +1311,20 @@ static ffi::Error ContactsImpl(
     ffi::Result<ffi::AnyBuffer> wfn_out, ffi::Result<ffi::AnyBuffer> max_ratio,
     ffi::ResultBuffer<ffi::F64> heat, ffi::ResultBuffer<ffi::PRED> conducts,
     ffi::Result<ffi::AnyBuffer> pair_rows,
-    ffi::Result<ffi::AnyBuffer> wall_rows, ffi::ResultBuffer<ffi::F64> rates) {
+    ffi::Result<ffi::AnyBuffer> wall_rows, ffi::ResultBuffer<ffi::F64> rates,
+    ffi::Result<ffi::AnyBuffer> ahead_out) {
   const ffi::DataType et = pos.element_type();
   if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
     return ffi::Error::InvalidArgument("drumheat_contacts: positions must be f32 or f64");
   for (const ffi::AnyBuffer* b : {&vel, &omg, &rad, &mass, &inertia, &spring, &wdist, &wnrm,
-                                  &wvel, &wspring, &tab_pp, &tab_pw, &wall_omega, &wdist0})
+                                  &wvel, &wspring, &tab_pp, &tab_pw, &wall_omega, &wdist0,
+                                  &body, &ahead, &ref})
     if (b->element_type() != et)
       return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
   for (ffi::Result<ffi::AnyBuffer>* b : {&force, &torque, &nspring, &ovl_out, &dist_out,
                                                &fn_out, &nwspring, &wovl_out, &wfn_out,
-                                               &max_ratio, &pair_rows, &wall_rows})
+                                               &max_ratio, &pair_rows, &wall_rows,
+                                               &ahead_out})
     if ((*b)->element_type() != et)
       return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
   const auto pd = pos.dimensions();
@@ -1302,6 +1382,20 @@ static ffi::Error ContactsImpl(
                                          "normal force must all have length M or all length 0");
   if (a.order && static_cast<int64_t>(order.element_count()) != a.n)
     return ffi::Error::InvalidArgument("drumheat_contacts: the cell order must have length N or 0");
+  const int64_t nb = static_cast<int64_t>(body.element_count());
+  if (nb != 0 && nb != dim && nb != a.n * dim)
+    return ffi::Error::InvalidArgument("drumheat_contacts: the body force must be (N, D), (1, D) "
+                                       "or of length 0");
+  a.body = nb ? body.untyped_data() : nullptr;
+  a.body_step = nb == a.n * dim && a.n > 1 ? dim : 0;
+  if (ahead.element_count() != 0) {
+    if (static_cast<int64_t>(ahead.element_count()) != 4 + dim ||
+        static_cast<int64_t>(ref.element_count()) != a.n * dim || ahead_out->element_count() != 1)
+      return ffi::Error::InvalidArgument("drumheat_contacts: the skin test takes 4 + D "
+                                         "constants, (N, D) reference positions, one output");
+    a.ahead = ahead.untyped_data(); a.ref = ref.untyped_data();
+    a.AH = ahead_out->untyped_data();
+  }
   const bool f64 = et == ffi::DataType::F64;
   bool ok;
   if (dim == 3) ok = f64 ? run<double, 3>(pool, a) : run<float, 3>(pool, a);
@@ -1323,13 +1417,15 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
+        .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Attr<double>("dt").Attr<double>("L").Attr<int32_t>("law").Attr<double>("h")
         .Attr<double>("tol").Attr<int32_t>("rot").Attr<int32_t>("fh").Attr<double>("cgap")
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>().Ret<ffi::Buffer<ffi::PRED>>()
-        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>());
+        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>()
+        .Ret<ffi::AnyBuffer>());
 
 // The friction heat's second pass (ContactHeat; see the header).
 static ffi::Error ContactHeatImpl(

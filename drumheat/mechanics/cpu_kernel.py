@@ -309,7 +309,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
              wall_normal, wall_velocity, wall_spring, *, tables_pp, tables_pw, wall_omega, dt,
              periodic_length=None, rotation=True, temperature=None, conduction_law=None,
              conduction_h=0.0, gap_tolerance=0.0, wall_distance_before=None,
-             pair_gap=0.0, order=None, details=True):
+             pair_gap=0.0, order=None, details=True, body_force=None, ahead=None):
     """Particle-particle and particle-wall contact forces in one C++ loop.
 
     The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
@@ -346,10 +346,19 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         take ranges of ranks instead of indices (round-off, as another thread count).
       details: False: the per-pair overlap, centre distance and normal force are not written
         (returned with length 0).
+      body_force: None, or a force added to each particle's contact force (gravity ``m g``):
+        (N, D), or (1, D) for one row that all particles share (:func:`uniform_or_all`). The
+        loop adds it to each particle's sum last, so the forces are those of ``body_force +
+        force`` added in JAX, bit for bit, without XLA's pass over (N, D) after the call.
+      ahead: None, or ``(constants, reference)`` for the coming step's skin test of the
+        integrator's loop (:func:`skin_test_constants`; ``reference`` the neighbour list's
+        reference positions (N, D)): the loop also returns the largest squared displacement
+        from them after the coming step's two half-kicks and drift, for particles of one mass
+        (contact_kernel.cc, the coming step's skin test).
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
     wall_overlap, wall_normal_force, max_overlap, heat, conducts, pair_rows, wall_rows,
-    rates)``: contact forces (N, D) and torques (N, 3) or (N,) on the particles (torques zero
+    rates, ahead)``: contact forces (N, D) and torques (N, 3) or (N,) on the particles (torques zero
     without ``rotation``); per pair the new springs (M, D), overlap, centre distance and normal
     force (M, or length 0 without ``details``); per wall slot the new springs (N, W, D), overlap
     and normal force (N, W); all zero where nothing touches; the largest overlap / radius (the
@@ -359,7 +368,8 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
     (:meth:`drumheat.mechanics.forces.ContactForces.pair_gap_mask`, the same test); with
     ``wall_distance_before`` (else length 0) each contact's friction-heat row (pairs (M, K_p),
     wall slots (N W, K_w): force on B, levers, rolling torque, ``U_new - U_old``) and the step's
-    losses at the continuous rates (3,) float64, J: damping, sliding, rolling.
+    losses at the continuous rates (3,) float64, J: damping, sliding, rolling; with ``ahead``
+    (else length 0) the coming step's largest squared displacement (1,), m^2.
     """
     target = load()
     dtype = jnp.dtype(pos.dtype)
@@ -385,8 +395,10 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
     fh = wall_distance_before is not None
     kp, kw = _rows(dim)
     outs += [sd((m, kp) if fh else (0,), dtype), sd((n * nw, kw) if fh else (0,), dtype),
-             sd((3,), jnp.float64)]
+             sd((3,), jnp.float64), sd((1,) if ahead is not None else (0,), dtype)]
     wd0 = wall_distance_before if fh else jnp.zeros((0,))
+    body = jnp.zeros((0,)) if body_force is None else body_force
+    consts, ref = (jnp.zeros((0,)), jnp.zeros((0,))) if ahead is None else ahead
     c = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
     # springs updated in place: input 8 -> output 2 (pairs), input 12 -> output 6 (walls)
     return jax.ffi.ffi_call(target, outs, input_output_aliases={8: 2, 12: 6})(
@@ -394,10 +406,22 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         jnp.asarray(ptype).astype(jnp.int32), idx.astype(jnp.int32), c(spring),
         c(wall_distance), c(wall_normal), c(wall_velocity), c(wall_spring), c(tables_pp),
         c(tables_pw), c(wall_omega), temperature.astype(jnp.float64), c(wd0),
-        _order_arg(order),
+        _order_arg(order), c(body), c(consts), c(ref),
         dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
         h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
         rot=np.int32(bool(rotation)), fh=np.int32(fh), cgap=np.float64(pair_gap))
+
+
+def skin_test_constants(dt, inv_mass, periodic_length, lo, dtype):
+    """The constants of :func:`contacts`' skin test (``ahead``) as the loop takes them:
+    ``c = (dt / 2) (1 / m)`` (the product XLA folds the integrator's ``dt/2 F (1/m)`` into),
+    dt, the period L of the last axis (0: none) and its reciprocal, and the box's lower corner
+    ``lo`` (the neighbour list's frame), in ``dtype``."""
+    one = lambda v: np.asarray(v, dtype)  # noqa: E731  a constant as XLA holds it
+    L = one(periodic_length or 0.0)
+    vals = [one(0.5 * dt) * one(inv_mass), one(dt), L, one(1.0) / L if L else one(0.0),
+            *np.asarray(lo, dtype)]
+    return jnp.asarray(np.array(vals, dtype))
 
 
 def _order_arg(order):

@@ -105,7 +105,9 @@ class ForceResult(NamedTuple):
     (capacity, dim) and wall_spring (N, W, dim) m: the updated tangential springs; contacts:
     :class:`Contacts`; max_overlap: largest overlap / smaller radius of the step; heat (N,) W:
     the per-step pair conduction (None without it); work: with friction heat, what the
-    contacts leave for :meth:`ContactForces.dissipation` (None without it).
+    contacts leave for :meth:`ContactForces.dissipation` (None without it); ahead: the coming
+    step's largest squared displacement from the list's reference positions, m^2, where the
+    call was asked for it (:attr:`ContactForces.looks_ahead`; else None).
     """
 
     force: jax.Array
@@ -116,6 +118,7 @@ class ForceResult(NamedTuple):
     max_overlap: jax.Array
     heat: Optional[jax.Array]
     work: Optional[ContactWork | KernelWork] = None
+    ahead: Optional[jax.Array] = None
 
 
 def _materialize(tree, pred):
@@ -214,19 +217,27 @@ class ContactForces:
         self.pair_details = pair_details
 
     # -- the one signature ---------------------------------------------------------------------
+    #: whether :meth:`__call__` takes ``ahead`` (the coming step's skin test in the call)
+    looks_ahead: bool = False
+
     def __call__(self, pos, vel, w, t, nbrs, pair_spring, wall_spring,
-                 temperature=None, details: bool | None = None) -> ForceResult:
+                 temperature=None, details: bool | None = None, ahead=None) -> ForceResult:
         """Forces and torques at ``pos`` with the velocities ``vel``, ``w`` (the half-step ones
         in the Verlet step: the dashpots and the spring increment use them, as LIGGGHTS does).
         ``temperature`` (N,) K: for the per-step pair conduction, if the system has one.
         ``details``: whether the :class:`Contacts` carry the per-pair mask, overlap, distance
         and normal force (else None; the C++ loop then does not write them); default
-        ``pair_details`` of the constructor."""
+        ``pair_details`` of the constructor. ``ahead``: where :attr:`looks_ahead`, the
+        constants of the coming step's skin test
+        (:func:`~drumheat.mechanics.cpu_kernel.skin_test_constants`); the result's ``ahead``
+        then holds its largest squared displacement from ``nbrs.reference_position``."""
+        if ahead is not None and not self.looks_ahead:
+            raise ValueError(f"{type(self).__name__} makes no skin test of the coming step")
         force = self.mass[:, None] * self.g_vec
         torque = jnp.zeros_like(w)
         details = self.pair_details if details is None else details
         res = self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                             temperature, details)
+                             temperature, details, ahead)
         if details:
             return res
         return res._replace(contacts=res.contacts._replace(
@@ -252,9 +263,10 @@ class ContactForces:
                     state.nbrs, state.pair_spring, state.wall_spring, details=True)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature, details) -> ForceResult:  # pragma: no cover - abstract
+                  temperature, details, ahead) -> ForceResult:  # pragma: no cover - abstract
         """The forces and contacts; ``details`` False: the caller drops the per-pair details
-        (a kernel may skip computing them)."""
+        (a kernel may skip computing them); ``ahead``: as :meth:`__call__` (None where the
+        class does not :attr:`looks_ahead`)."""
         raise NotImplementedError
 
     def dissipation(self, work, vel, w) -> Dissipation:  # pragma: no cover - abstract
@@ -354,7 +366,7 @@ class JaxContactForces(ContactForces):
     one scatter of forces and torques), walls as an (N, W) block."""
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature, details) -> ForceResult:
+                  temperature, details, ahead) -> ForceResult:
         n, gap_pp, radius = self.n, self.gap_pp, self.radius
         i, j = nbrs.idx[0], nbrs.idx[1]
         force, torque, new_spring, ovl, dist, fn, active, max_ovl, pair_work = self._pairs(
@@ -547,9 +559,15 @@ class CpuContactForces(ContactForces):
         self._kernel_particles = (
             *(cpu_kernel.uniform_or_all(a) for a in (self.radius, self.mass, self.inertia)),
             self.ptype if self.params.n_types > 1 else jnp.zeros((1,), jnp.int32))
+        # gravity as the loop adds it to each particle's force: the base class's m g (the same
+        # products), one row where all particles share the mass
+        m = np.asarray(cpu_kernel.uniform_or_all(self.mass))
+        self._body_force = jnp.asarray(m[:, None] * np.asarray(self.g_vec), self.dtype)
+        # the coming step's skin test in the loop: its kick c F takes one mass for all
+        self.looks_ahead = m.shape == (1,)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature, details) -> ForceResult:
+                  temperature, details, ahead) -> ForceResult:
         i, j = nbrs.idx[0], nbrs.idx[1]
         wd, wn, wv = self.wall_geometry(pos, t)
         heat_args = {}
@@ -561,10 +579,11 @@ class CpuContactForces(ContactForces):
             heat_args["wall_distance_before"] = self.wall_geometry(pos - self.dt_c * vel,
                                                                    t - self.dt)[0]
         (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, p_cond,
-         pair_rows, wall_rows, rates) = self._kernel.contacts(
+         pair_rows, wall_rows, rates, moved) = self._kernel.contacts(
             self.pair_positions(pos), vel, w, *self._kernel_particles, nbrs.idx, pair_spring,
             wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
-            pair_gap=self.gap_pp, order=nbrs.order, details=details)
+            pair_gap=self.gap_pp, order=nbrs.order, details=details, body_force=self._body_force,
+            ahead=None if ahead is None else (ahead, nbrs.reference_position))
         active = ovl > 0
         w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
         # p_cond: the pairs within the conduction gap, pair_gap_mask's test in the C++ loop
@@ -578,8 +597,9 @@ class CpuContactForces(ContactForces):
         work = None
         if self.friction_heat is not None:
             work = KernelWork(nbrs.idx, nbrs.order, pair_rows, wall_rows, wv, rates)
-        return ForceResult(force + fk, torque + tk, new_spring, new_wall_spring, contacts,
-                           mx[0], heat, work)
+        # fk holds the gravity `force` already: the loop's body force, added there last
+        return ForceResult(fk, torque + tk, new_spring, new_wall_spring, contacts,
+                           mx[0], heat, work, None if ahead is None else moved[0])
 
     def dissipation(self, work: KernelWork, vel, w) -> Dissipation:
         """The step's heat from the C++ loop's rows (its second pass,

@@ -57,7 +57,7 @@ import numpy as np
 
 from drumheat.geometry.walls import expand_walls, wall_bounds
 from drumheat.mechanics.contact_forces import ContactParams, critical_time_step
-from drumheat.mechanics.cpu_kernel import shared_value
+from drumheat.mechanics.cpu_kernel import shared_value, skin_test_constants
 from drumheat.mechanics.conduction import PairConduction
 from drumheat.mechanics.dissipation import FrictionHeat, boundary_energy
 from drumheat.mechanics.errors import (
@@ -623,11 +623,29 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     def needs_rebuild(state: DEMState, x):
         return neighbor.max_displacement_sq(x, state.nbrs) > half_skin_sq
 
+    # The coming step's skin test in the contact call (ContactForces.looks_ahead: the C++ loop
+    # for particles of one mass): with the step's forces at hand it computes the coming step's
+    # kicks and drift and their largest displacement, as `needs_rebuild(st, drift(st,
+    # kicked(st, 1)))` of the loop's condition does in XLA (a pass over the particles' positions,
+    # velocities, forces and reference positions every step). Only where the step's forces are
+    # the call's own (no external force) and the positions are the mechanics' (not mixed
+    # precision, whose pair law reads positions rounded to the mechanics' type).
+    ahead = None
+    if (forces.looks_ahead and external_force is None and boundary_update is None
+            and batch_axis is None and not always_rebuild):
+        ahead = skin_test_constants(dt, inv_m, periodic_length, neighbor.lo, dtype)
+
     def step(state: DEMState, pairs: str = "check", drifted=None):
         # pairs: "check" (rebuild the neighbour list if some particle moved more than half the
         # skin: a lax.cond), "keep" (the caller knows it need not) or "rebuild"; drifted:
         # drift(state) if the caller has it already
+        return step_ahead(state, pairs, drifted)[:2]
+
+    def step_ahead(state: DEMState, pairs: str = "check", drifted=None, look: bool = False):
+        # step(), and with `look` (where `ahead` serves) the coming step's largest squared
+        # displacement from the list's reference positions (else None)
         v, w, x = drift(state) if drifted is None else drifted
+        look = look and ahead is not None and x.dtype == dtype
         t = state.time + jnp.asarray(dt, time_dtype)
         extra = state.extra
         args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
@@ -643,9 +661,10 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
                                                       keep, args)
         if pdata is not None:
             extra = extra.with_pair_arrays(pdata)
-        f, tq, spring, wspring, contacts, ovl, heat, work = forces(
-            x, v, w, t, nbrs, spring, state.wall_spring,
-            temperature=extra if conduction is not None else None)
+        res = forces(x, v, w, t, nbrs, spring, state.wall_spring,
+                     temperature=extra if conduction is not None else None,
+                     ahead=ahead if look else None)
+        f, tq, spring, wspring, contacts, ovl, heat, work = res[:8]
         if external_force is not None:
             f = f + external_force(x, v, t, extra).astype(dtype)
         v, w = half_kick(v, w, f, tq)
@@ -661,7 +680,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             new = new._replace(extra=extra_update(new.extra, new, contacts, dt))
         if boundary_update is not None:
             new = boundary_update(new)
-        return new, contacts
+        return new, contacts, res.ahead
 
     def energies(state):
         m = mass
@@ -711,7 +730,11 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         # The coming step's kick and positions are computed twice (the same values), in the
         # loop condition, which tests them against the skin, and in the step: carried, they
         # made XLA copy them every step (from the carry's drift into the state).
+        # With the skin test in the contact call (`ahead`), the carry's `moved` holds the
+        # coming step's largest squared displacement from each step's call (the loop's first
+        # test, before any call, from XLA); the loop's condition then only compares it.
         pending = boundary_update is None
+        in_call = pending and ahead is not None and state.position.dtype == dtype
 
         def kicked(st, aux):
             if not pending:
@@ -719,16 +742,22 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             v, w = half_kick(st.velocity, st.angular_velocity, aux * st.force, aux * st.torque)
             return half_kick(v, w, st.force, st.torque)
 
+        def moved_by(st, aux):
+            return neighbor.max_displacement_sq(drift(st, kicked(st, aux))[2], st.nbrs)
+
         def advance(c, pairs):
-            st, k, aux = c
+            st, k, aux, moved = c
             v, w, x = drift(st, kicked(st, aux))
-            new = step(st, pairs, (v, w, x))[0]
+            new, _, ahead_moved = step_ahead(st, pairs, (v, w, x), look=in_call)
             if not pending:
-                return new, k + 1, kick(new)
-            return new._replace(velocity=v, angular_velocity=w), k + 1, jnp.ones_like(aux)
+                return new, k + 1, kick(new), moved
+            new = new._replace(velocity=v, angular_velocity=w)
+            return new, k + 1, jnp.ones_like(aux), ahead_moved if in_call else moved
 
         def go_on(c):
-            st, k, aux = c
+            st, k, aux, moved = c
+            if in_call:
+                return (k < n_steps) & ~(moved > half_skin_sq)
             return (k < n_steps) & ~needs_rebuild(st, drift(st, kicked(st, aux))[2])
 
         def segment(c):
@@ -737,7 +766,9 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
 
         k0 = jnp.zeros_like(jnp.asarray(n_steps))
         aux = jnp.zeros((), state.force.dtype) if pending else kick(state)
-        st, _, aux = jax.lax.while_loop(lambda c: c[1] < n_steps, segment, (state, k0, aux))
+        moved = moved_by(state, aux) if in_call else jnp.zeros((), dtype)
+        st, _, aux, _ = jax.lax.while_loop(lambda c: c[1] < n_steps, segment,
+                                           (state, k0, aux, moved))
         if not pending:
             return st
         v, w = half_kick(st.velocity, st.angular_velocity, aux * st.force, aux * st.torque)
