@@ -1,7 +1,7 @@
 """Where the step of glass-drum-3d goes on CPU: the product path's cost split per step.
 
 Usage: python scripts/profile_scene_step.py [--n 10000] [--backend cpu] [--steps 2000]
-       [--packing-cache DIR] [--trace]
+       [--packing-cache DIR] [--trace] [--trace-run]
 
 The built-in scene ``glass-drum-3d`` at N particles (``groups.0.count = N``, ``drum.depth =
 N x 2.6e-5 m``) through the product path (``make_motion(scene).dem``), after ``--warm``
@@ -17,7 +17,9 @@ steps, timed piece by piece on the same state:
 * ``rebuild``: one neighbour rebuild (cell list build, pair sort, remap of the springs and the
   contact-time accumulators), and its pieces;
 * with ``--trace``: a ``jax.profiler`` trace of the no-rebuild loop, its events summed by
-  track and name (the largest twenty of each track), per step.
+  track and name (the largest twenty of each track), per step; with ``--trace-run`` the same
+  of the run's own loop (``dem._run_steps``: the steps between rebuilds without the per-step
+  ``lax.cond``, the skin test in the loop's condition or the C++ call), over ``--loop`` steps.
 
 The packing (the pour, minutes at N = 50 000) is kept in ``--packing-cache`` to be reused.
 Each line prints the machine's load and the CPU steal during its timing (scripts/machine.py).
@@ -116,6 +118,7 @@ def main():
     ap.add_argument("--warm", type=int, default=500)
     ap.add_argument("--packing-cache", default="/tmp/drumheat_packings")
     ap.add_argument("--trace", action="store_true")
+    ap.add_argument("--trace-run", action="store_true")
     args = ap.parse_args()
     motion, state = scene_motion(args.n, args.backend, args.packing_cache)
     dem = motion.dem
@@ -146,6 +149,14 @@ def main():
         print("trace of the no-rebuild loop, per step:")
         _, totals, _ = trace_totals(f["keep"], (state, k), "/tmp/drumheat_profile_scene_step")
         print_split(totals, args.loop)
+    if args.trace_run:
+        start = dem.adopt(state)
+        r0 = int(start.n_rebuilds)
+        end = dem._run_steps(start, k)
+        print(f"trace of the run's loop (dem._run_steps), per step ({int(end.n_rebuilds) - r0} "
+              f"rebuilds in {args.loop} steps):")
+        _, totals, _ = trace_totals(dem._run_steps, (start, k), "/tmp/drumheat_profile_run")
+        print_split(totals, args.loop, top=30)
 
 
 if __name__ == "__main__":

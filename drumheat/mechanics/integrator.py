@@ -715,7 +715,9 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         with one step that rebuilds. Without the per-step ``lax.cond`` XLA updates the pair
         arrays in place instead of copying the neighbour indices and springs every step
         (~0.3 ms per step at N = 1e4 on XLA:CPU, docs/performance.md). The decisions, and so
-        the trajectory, are those of :func:`step`.
+        the trajectory, are those of :func:`step` (with the skin test in the C++ call, whose
+        squared displacement may differ from XLA's by an ulp, unless one falls within an ulp
+        of half the skin squared).
         """
         # The loop carries each step's state with its last half-kick pending: velocities and
         # spins at the half step, which the next step kicks twice (the last half-kick of its
@@ -756,9 +758,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
 
         def go_on(c):
             st, k, aux, moved = c
-            if in_call:
-                return (k < n_steps) & ~(moved > half_skin_sq)
-            return (k < n_steps) & ~needs_rebuild(st, drift(st, kicked(st, aux))[2])
+            return (k < n_steps) & ~((moved if in_call else moved_by(st, aux)) > half_skin_sq)
 
         def segment(c):
             c = jax.lax.while_loop(go_on, lambda c: advance(c, "keep"), c)

@@ -586,7 +586,7 @@ class DEMConfig(Table):
             "slowly moving particles chatter and slide where they should stick "
             "(docs/models/dem-mechanics.md, time step).")
     skin: Optional[float] = spec(None, unit="m", gt=0,
-                                 doc="Neighbour-list skin; default half the largest diameter.")
+                                 doc="Neighbour-list skin; default half the largest radius.")
     contact_backend: str = spec(
         "auto", choices=("auto", "jax", "cpu"),
         doc="Contact kernel: 'cpu' the C++ contact loop (compiled on first use with the "
