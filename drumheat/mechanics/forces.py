@@ -233,11 +233,9 @@ class ContactForces:
         then holds its largest squared displacement from ``nbrs.reference_position``."""
         if ahead is not None and not self.looks_ahead:
             raise ValueError(f"{type(self).__name__} makes no skin test of the coming step")
-        force = self.mass[:, None] * self.g_vec
-        torque = jnp.zeros_like(w)
         details = self.pair_details if details is None else details
-        res = self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                             temperature, details, ahead)
+        res = self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature,
+                             details, ahead)
         if details:
             return res
         return res._replace(contacts=res.contacts._replace(
@@ -262,12 +260,16 @@ class ContactForces:
         return self(state.position, state.velocity, state.angular_velocity, state.time,
                     state.nbrs, state.pair_spring, state.wall_spring, details=True)
 
-    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature, details, ahead) -> ForceResult:  # pragma: no cover - abstract
-        """The forces and contacts; ``details`` False: the caller drops the per-pair details
-        (a kernel may skip computing them); ``ahead``: as :meth:`__call__` (None where the
-        class does not :attr:`looks_ahead`)."""
+    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
+                  ahead) -> ForceResult:  # pragma: no cover - abstract
+        """The forces (gravity included, :meth:`gravity`) and contacts; ``details`` False: the
+        caller drops the per-pair details (a kernel may skip computing them); ``ahead``: as
+        :meth:`__call__` (None where the class does not :attr:`looks_ahead`)."""
         raise NotImplementedError
+
+    def gravity(self, mass):
+        """The force of gravity ``m g`` on particles of masses ``mass`` (N,), (N, dim)."""
+        return mass[:, None] * self.g_vec
 
     def dissipation(self, work, vel, w) -> Dissipation:  # pragma: no cover - abstract
         """The heat of the step (friction heat) from the ``work`` of :class:`ForceResult` at the
@@ -365,10 +367,11 @@ class JaxContactForces(ContactForces):
     """The contact law in JAX operations: pairs through the neighbour list (a gather, the law,
     one scatter of forces and torques), walls as an (N, W) block."""
 
-    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature, details, ahead) -> ForceResult:
+    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
+                  ahead) -> ForceResult:
         n, gap_pp, radius = self.n, self.gap_pp, self.radius
         i, j = nbrs.idx[0], nbrs.idx[1]
+        force, torque = self.gravity(self.mass), jnp.zeros_like(w)  # the sums start from them
         force, torque, new_spring, ovl, dist, fn, active, max_ovl, pair_work = self._pairs(
             self.pair_positions(pos), vel, w, nbrs, pair_spring, force, torque, i, j)
         pair_dist = dist  # every pair's, for the conduction gap tolerance (heat_flow)
@@ -559,15 +562,15 @@ class CpuContactForces(ContactForces):
         self._kernel_particles = (
             *(cpu_kernel.uniform_or_all(a) for a in (self.radius, self.mass, self.inertia)),
             self.ptype if self.params.n_types > 1 else jnp.zeros((1,), jnp.int32))
-        # gravity as the loop adds it to each particle's force: the base class's m g (the same
-        # products), one row where all particles share the mass
-        m = np.asarray(cpu_kernel.uniform_or_all(self.mass))
-        self._body_force = jnp.asarray(m[:, None] * np.asarray(self.g_vec), self.dtype)
+        # gravity as the loop adds it to each particle's force last, one row where all
+        # particles share the mass
+        m = cpu_kernel.uniform_or_all(self.mass)
+        self._body_force = self.gravity(m)
         # the coming step's skin test in the loop: its kick c F takes one mass for all
         self.looks_ahead = m.shape == (1,)
 
-    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, force, torque,
-                  temperature, details, ahead) -> ForceResult:
+    def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
+                  ahead) -> ForceResult:
         i, j = nbrs.idx[0], nbrs.idx[1]
         wd, wn, wv = self.wall_geometry(pos, t)
         heat_args = {}
@@ -597,9 +600,9 @@ class CpuContactForces(ContactForces):
         work = None
         if self.friction_heat is not None:
             work = KernelWork(nbrs.idx, nbrs.order, pair_rows, wall_rows, wv, rates)
-        # fk holds the gravity `force` already: the loop's body force, added there last
-        return ForceResult(fk, torque + tk, new_spring, new_wall_spring, contacts,
-                           mx[0], heat, work, None if ahead is None else moved[0])
+        # fk includes gravity: the loop's body force, added there last
+        return ForceResult(fk, tk, new_spring, new_wall_spring, contacts, mx[0], heat, work,
+                           None if ahead is None else moved[0])
 
     def dissipation(self, work: KernelWork, vel, w) -> Dissipation:
         """The step's heat from the C++ loop's rows (its second pass,

@@ -642,10 +642,9 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         return step_ahead(state, pairs, drifted)[:2]
 
     def step_ahead(state: DEMState, pairs: str = "check", drifted=None, look: bool = False):
-        # step(), and with `look` (where `ahead` serves) the coming step's largest squared
+        # step(), and with `look` (run_segments' `in_call`) the coming step's largest squared
         # displacement from the list's reference positions (else None)
         v, w, x = drift(state) if drifted is None else drifted
-        look = look and ahead is not None and x.dtype == dtype
         t = state.time + jnp.asarray(dt, time_dtype)
         extra = state.extra
         args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
