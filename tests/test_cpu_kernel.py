@@ -28,7 +28,8 @@ R_P = 0.002  # particle radius (m)
 
 def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling=True,
          rotation=True, calm=False, friction_heat=None, shuffle=False, layers=4,
-         position_dtype=None, contact_details=True, one_material=False):
+         position_dtype=None, contact_details=True, one_material=False, conduction_gap=None,
+         shell_only=False):
     """A small moving bed of two materials with rolling resistance in the lower half of an
     annulus between a rotating drum shell and a counter-rotating inner cylinder (2D, or a 3D
     slice with periodic z): spheres of 0.97-1 r on a 1.97 r lattice, jittered, so that many
@@ -42,7 +43,8 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     function of the particles that gives one). ``shuffle``: the particles numbered at random
     (else along the lattice, so that neighbours lie near each other in the numbering).
     ``layers``: lattice layers along the periodic z (3D); ``position_dtype``: make_dem's (the
-    state's positions in it); ``contact_details``: make_dem's."""
+    state's positions in it); ``contact_details``, ``conduction_gap``: make_dem's;
+    ``shell_only``: without the inner cylinder (the bed lies on the shell alone)."""
     rng = np.random.default_rng(seed)
     R, r_in = 0.03, 0.008
     a = (2.0 if calm else 1.97) * R_P
@@ -73,16 +75,18 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
         radius, ptype = np.full(n, 0.985 * R_P), np.zeros(n, int)
     part = make_particles(radius, np.where(ptype == 0, 2500.0, 2700.0), ptype=ptype)
     two = lambda a, b, c: np.array([[a, b], [b, c]])  # noqa: E731  symmetric (T, T)
-    walls = [DrumShell(R, rpm=30.0), InnerCylinder(r_in, rpm=-20.0)]
+    walls = [DrumShell(R, rpm=30.0), InnerCylinder(r_in, rpm=-20.0)][:1 if shell_only else 2]
+    w = 1 if shell_only else 2  # the wall tables' columns
     params = contact_params(
         two(1e5, 1.4e5, 2e5), kt=two(0.9e5, 1.2e5, 1.7e5),
-        kn_wall=np.array([[1.2e5, 0.8e5], [1.5e5, 1e5]]),
-        kt_wall=np.array([[1e5, 0.7e5], [1.3e5, 0.9e5]]),
-        damping_ratio=two(0.3, 0.25, 0.2), wall_damping_ratio=np.array([[0.3, 0.2], [0.1, 0.4]]),
+        kn_wall=np.array([[1.2e5, 0.8e5], [1.5e5, 1e5]])[:, :w],
+        kt_wall=np.array([[1e5, 0.7e5], [1.3e5, 0.9e5]])[:, :w],
+        damping_ratio=two(0.3, 0.25, 0.2),
+        wall_damping_ratio=np.array([[0.3, 0.2], [0.1, 0.4]])[:, :w],
         tangential_damping_ratio=two(0.2, 0.3, 0.25), friction=two(0.5, 0.4, 0.6),
-        wall_friction=np.array([[0.6, 0.3], [0.4, 0.5]]),
+        wall_friction=np.array([[0.6, 0.3], [0.4, 0.5]])[:, :w],
         rolling_friction=two(0.05, 0.1, 0.02) * rolling,
-        wall_rolling_friction=np.array([[0.08, 0.03], [0.0, 0.1]]) * rolling, n_types=2)
+        wall_rolling_friction=np.array([[0.08, 0.03], [0.0, 0.1]])[:, :w] * rolling, n_types=2)
     if one_material:
         params = contact_params(1e5, kt=0.9e5, kn_wall=1.2e5, kt_wall=1e5, damping_ratio=0.3,
                                 wall_damping_ratio=0.2, tangential_damping_ratio=0.25,
@@ -99,6 +103,8 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
               friction_heat=friction_heat(part) if callable(friction_heat) else friction_heat)
     if dim == 3:
         kw["periodic_length"] = layers * a
+    if conduction_gap is not None:
+        kw["conduction_gap"] = conduction_gap
     if calm:  # 50 g: the bed forms within the few hundred steps of a test
         kw["gravity"] = np.array([0.0, -500.0, 0.0][:dim])
     dem = make_dem(part, walls, params, **kw)
@@ -403,6 +409,43 @@ def test_the_body_force_is_added_last(monkeypatch, dim, dtype, shuffle):
 
 
 @needs_kernel
+@pytest.mark.parametrize("dim,dtype,shuffle", [(3, jnp.float64, False), (2, jnp.float32, True),
+                                               (3, jnp.float32, True), (2, jnp.float64, False)])
+def test_the_drum_shells_geometry_in_the_call(dim, dtype, shuffle):
+    """With a drum shell as the first wall (``CpuContactForces.shell``) the C++ loop computes
+    the shell's distance, normal and velocity at the particles itself: every output of the
+    jitted step's forces (forces, torques, springs, overlaps, heat, the wall slots' conduction
+    flags) is that of the call given XLA's geometry of all walls, bit for bit (the loop takes
+    XLA's roundings of DrumShell.evaluate, contact_kernel.cc), beside an inner cylinder whose
+    geometry XLA gives, without and with a wall gap tolerance; the flags are wall_gap_mask's."""
+    for gap in (None, (0.05, 0.1)):
+        st = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=shuffle, conduction_gap=gap)[1]
+        f = _bed(dim, dtype, "cpu", "overlap", 0.05, shuffle=shuffle,
+                 conduction_gap=gap)[0]._forces.__wrapped__.func
+        assert f.shell == (0.03, 2 * np.pi * 30.0 / 60.0)
+
+        @jax.jit
+        def call(s):
+            return f(s.position, s.velocity, s.angular_velocity, s.time, s.nbrs, s.pair_spring,
+                     s.wall_spring, temperature=s.extra)
+
+        looped = call(st)
+        f.shell = None  # the instance's: XLA's geometry for every wall
+        given = call(st)
+        wd = jax.jit(f.wall_geometry)(st.position, st.time)[0]
+        del f.shell
+        for x, y in zip(jax.tree_util.tree_leaves(looped), jax.tree_util.tree_leaves(given)):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        c = looped.contacts
+        np.testing.assert_array_equal(np.asarray(c.wall_conducts),
+                                      np.asarray(f.wall_gap_mask(wd, c.wall_mask)))
+        touching = np.asarray(c.wall_mask).reshape(-1, 2)
+        assert touching[:, 0].sum() >= 5 and touching[:, 1].sum() >= 1  # both walls pressed
+        conducting = int(np.sum(np.asarray(c.wall_conducts)))
+        assert (conducting > touching.sum()) == (gap is not None)  # gaps within the tolerance
+
+
+@needs_kernel
 @pytest.mark.parametrize("dim,dtype,shuffle", [(3, jnp.float64, False), (2, jnp.float32, True)])
 def test_the_coming_steps_skin_test_in_the_call(monkeypatch, dim, dtype, shuffle):
     """For particles of one mass the C++ loop also makes the skin test of the integrator's
@@ -459,6 +502,110 @@ def test_the_coming_steps_skin_test_in_the_call(monkeypatch, dim, dtype, shuffle
     with pytest.raises(ValueError, match="no skin test"):
         jdem._forces.__wrapped__.func(st.position, st.velocity, st.angular_velocity, st.time,
                                       st.nbrs, st.pair_spring, st.wall_spring, ahead=consts)
+
+
+@needs_kernel
+@pytest.mark.parametrize("dim,dtype,shuffle", [(3, jnp.float64, False), (2, jnp.float32, True),
+                                               (3, jnp.float32, True), (2, jnp.float64, False)])
+def test_the_steps_kicks_and_drift_in_the_call(dim, dtype, shuffle):
+    """For particles of one mass and moment of inertia in a drum shell alone
+    (``CpuContactForces.drifts``) the C++ loop makes the step's two half-kicks and drift itself
+    (``drift``): given the step before's positions, velocities and spins (its last half-kick
+    pending, or not: ``aux`` 1 or 0) and its forces and torques, the call's outputs and the
+    drifted state equal XLA's kicks and drift (integrator.run_segments' arithmetic, jitted)
+    followed by the call at their result, bit for bit, in the particles' own numbering and in
+    the cell order; a kernel or a bed that cannot make them refuses."""
+    import dataclasses
+
+    from drumheat.mechanics.integrator import _carry_pairs, wrap_periodic_axis
+    from drumheat.mechanics.neighbors import sort_pairs
+
+    kw = dict(shuffle=shuffle, one_material=True, shell_only=True)
+    st = _bed(dim, dtype, "jax", "overlap", 0.05, **kw)[1]
+    cdem = _bed(dim, dtype, "cpu", "overlap", 0.05, **kw)[0]
+    f, n = cdem._forces.__wrapped__.func, st.position.shape[0]
+    assert f.drifts
+    if shuffle:  # the cell order
+        cells = cdem.neighbor.grid.order(st.nbrs.reference_position)
+        st = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+    rng = np.random.default_rng(3)
+    st = st._replace(force=jnp.asarray(rng.normal(0.0, 0.05, st.force.shape), dtype),
+                     torque=jnp.asarray(rng.normal(0.0, 1e-5, st.torque.shape), dtype))
+    dt, L = cdem.dt, cdem.neighbor.periodic_length
+    half = 0.5 * dt
+    inv_m = 1.0 / cpu_kernel.shared_value(f.mass)
+    inv_i = 1.0 / cpu_kernel.shared_value(f.inertia)
+
+    def forces(s, x, v, w, drift=None):
+        return f(x, v, w, s.time + dt, s.nbrs, s.pair_spring, s.wall_spring,
+                 temperature=s.extra, drift=drift)
+
+    @jax.jit
+    def in_xla(s, aux):  # run_segments' kicked(st, aux), drift(...), then the call
+        v = s.velocity + half * (aux * s.force) * inv_m
+        w = s.angular_velocity + half * (aux * s.torque) * inv_i
+        v = v + half * s.force * inv_m
+        w = w + half * s.torque * inv_i
+        x = wrap_periodic_axis(s.position + dt * v, L, near=True)
+        return forces(s, x, v, w), (x, v, w)
+
+    @jax.jit
+    def in_call(s, aux):
+        consts = cpu_kernel.drift_constants(aux, dt, inv_m, inv_i, L, dtype)
+        res = forces(s, s.position, s.velocity, s.angular_velocity, (consts, s.force, s.torque))
+        return res._replace(drifted=None), res.drifted
+
+    for aux in (0.0, 1.0):
+        a = jnp.asarray(aux, dtype)
+        (want, drifted), (got, made) = in_xla(st, a), in_call(st, a)
+        for x, y in zip(jax.tree_util.tree_leaves((want, drifted)),
+                        jax.tree_util.tree_leaves((got, made))):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        assert int(np.sum(np.asarray(got.contacts.wall_mask))) >= 5  # the shell carries the bed
+    consts = cpu_kernel.drift_constants(1.0, dt, inv_m, inv_i, L, dtype)
+    two = _bed(dim, dtype, "cpu", "overlap", 0.05, one_material=True)[0]._forces.__wrapped__.func
+    jax_f = _bed(dim, dtype, "jax", "overlap", 0.05, **kw)[0]._forces.__wrapped__.func
+    assert not two.drifts and not jax_f.drifts  # the inner cylinder's geometry is XLA's
+    for g in (two, jax_f):
+        with pytest.raises(ValueError, match="no kicks and drift"):
+            g(st.position, st.velocity, st.angular_velocity, st.time, st.nbrs, st.pair_spring,
+              st.wall_spring, drift=(consts, st.force, st.torque))
+
+
+@needs_kernel
+@pytest.mark.parametrize("dim,dtype", [(2, jnp.float64), (3, jnp.float32)])
+def test_the_loop_with_the_kicks_and_drift_in_the_call(monkeypatch, dim, dtype):
+    """The integrator's loop between rebuilds with the steps' kicks and drift in the C++ call
+    (one mass and moment of inertia, the drum shell alone) gives the run of the loop that makes
+    them in XLA bit for bit, through several neighbour rebuilds, and of the step called one by
+    one."""
+    from drumheat.mechanics import forces as forces_mod
+
+    def run(drifts, steps=400):
+        init = forces_mod.CpuContactForces.__init__
+
+        def patched(self, *a, **kw):
+            init(self, *a, **kw)
+            self.drifts = self.drifts and drifts
+
+        monkeypatch.setattr(forces_mod.CpuContactForces, "__init__", patched)
+        kw = dict(calm=True, one_material=True, shell_only=True)
+        _, st = _bed(dim, dtype, "jax", "projected", 0.05, **kw)
+        dem = _bed(dim, dtype, "cpu", "projected", 0.05, **kw)[0]
+        f = dem._forces.__wrapped__.func
+        assert f.drifts == drifts and f.looks_ahead
+        return dem, st, dem.run_steps(st, steps)
+
+    dem, st, a = run(True)
+    b = run(False)[2]
+    assert int(a.n_rebuilds) - int(st.n_rebuilds) >= 3
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    c = dem.adopt(st)
+    for _ in range(400):
+        c = dem.step(c)[0]
+    for field in ("position", "velocity", "angular_velocity", "pair_spring", "n_rebuilds"):
+        np.testing.assert_array_equal(np.asarray(getattr(a, field)), np.asarray(getattr(c, field)))
 
 
 @needs_kernel

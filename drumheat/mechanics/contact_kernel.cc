@@ -9,8 +9,9 @@
 //  * rolling_torque: constant directional torque M = -min(mu_r R* F_n, I* |w_rel| / dt)
 //    w_rel / |w_rel| (Ai et al. 2011 "model A", capped so that it cannot reverse w_rel).
 // for the particle-particle pairs and the particle-wall contacts (the wall geometry is evaluated
-// in JAX and comes in as distance, unit normal and wall velocity per particle and wall; a wall
-// is partner A with infinite mass, no radius, spin omega_wall about z).
+// in JAX and comes in as distance, unit normal and wall velocity per particle and wall, except a
+// drum shell's, which the loop computes itself: input 22; a wall is partner A with infinite
+// mass, no radius, spin omega_wall about z).
 //
 // Scope: 3D (positions, velocities, spins (N, 3)) and 2D (a monolayer of spheres: positions and
 // velocities (N, 2) in x-y, spin (N) about z, torque a_x f_y - a_y f_x, as cross_w_a / cross_a_f
@@ -27,8 +28,9 @@
 //   3 radii (N) S             4 masses (N) S           5 moments of inertia (N) S
 //   6 particle types (N) s32  7 pairs (2, M) s32, padding N
 //   8 pair springs (M, D) S
-//   9 wall distance (N, W) S  10 wall normal, from the wall to the particle (N, W, D) S
-//  11 wall velocity at the particle (N, W, D) S       12 wall springs (N, W, D) S
+//   9 wall distance (N, W') S  10 wall normal, from the wall to the particle (N, W', D) S
+//  11 wall velocity at the particle (N, W', D) S      12 wall springs (N, W, D) S
+//     (W' = W, or W - 1 with a drum shell, input 22: the walls 1 .. W - 1)
 //  13 particle-particle tables (6, T, T) S: kn, kt, zeta_n, zeta_t, mu, mu_roll
 //  14 particle-wall tables (6, T, W) S: the same per particle type and wall
 //  15 wall angular velocities about z (W) S          16 temperatures (N or 0) f64
@@ -37,9 +39,14 @@
 //  19 body force (N, D) or (1, D) S, one row for every particle (gravity m g), or length 0
 //  20 the coming step's skin test (see below): c, dt, L, 1 / L, lo_0 .. lo_{D-1} (4 + D) S,
 //     or length 0; 21 the neighbour list's reference positions (N, D) S (with 20)
+//  22 the drum shell (2) S: radius R and angular velocity omega of wall 0, a cylinder about
+//     the z axis (geometry.walls.DrumShell), whose geometry the loop computes (below); or
+//     length 0: every wall's geometry given (inputs 9-11)
+//  23 the step's kicks and drift (below): a, c, c_I, dt, L (5) S, or length 0; 24 the forces
+//     and 25 the torques of the step before (N, D) and (N, 3) or (N) S (with 23)
 // Attributes: dt, L (period of the last axis, 0 = none), law (conduction, < 0 = none), h
 // (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling), fh
-// (1: friction heat), cgap (the gap tolerance of output 11).
+// (1: friction heat), cgap (the gap tolerance of output 11), wgap (that of output 16).
 // Outputs: 0 forces (N, D): the contacts' sum plus the body force (input 19, added last),
 // 1 torques (N, 3) or (N); 2 new pair springs (M, D); 3 overlap, 4 centre distance, 5 normal
 // force per pair (M, or all three of length 0: not written, for a caller that reads none of
@@ -50,7 +57,38 @@
 // most cgap min(d_i, d_j) (the pair_conducts of forces.ContactForces.pair_gap_mask); friction
 // heat (length 0 without fh): 12 pair rows (M, KP) S, 13 wall rows (N W, KW) S, 14 the losses
 // at the continuous rates (3) f64; 15 the coming step's largest squared displacement (1) S
-// (length 0 without input 20).
+// (length 0 without input 20); 16 whether each wall slot conducts (N, W) pred: it touches, or
+// with wgap > 0 its overlap r - d is at least -wgap 2 r (the wall_gap_mask of
+// forces.ContactForces), or length 0 (not written); with input 23 (else length 0 each) 17 the
+// positions, 18 the velocities and 19 the spins after the step's kicks and drift, at which the
+// call computes the contacts (cpu_kernel.py aliases them with inputs 0-2, and the forces and
+// torques, outputs 0-1, with inputs 24-25: updated in place; the loop reads 24-25 only in the
+// pass that packs the records, before it sums a force).
+//
+// The step's kicks and drift (inputs 23-25; integrator.run_segments): the positions, velocities
+// and spins given are those of the step before, the velocities and spins at its half step with
+// a times its last half-kick pending (a = 0 or 1), F and M its forces and torques. The call
+// first does what the loop did in XLA before it, for particles of one mass and one moment of
+// inertia: v' = fma(F, c, fma(a F, c, v)) (the pending half-kick and the step's first one,
+// c = dt / (2 m)), w' = fma(M, c_I, fma(a M, c_I, w)) with rotation (c_I = dt / (2 I); else
+// w' = w), x' = fma(v', dt, x) with the periodic last axis (L > 0) brought back into [0, L) by
+// one period: the roundings of XLA's code for integrator.run_segments' kicks and drift on
+// x86-64 (it fuses each product and sum into a multiply-add and folds (dt / 2) (1 / m) into
+// one constant); then the contacts at x', v', w' as if they had been given. It runs in the pass
+// that packs the particles' records (the one pass that reads them), where XLA made three passes
+// over the particles and wrote them out for the loop to read back. The walls' geometry is then
+// the loop's own (no walls, or the drum shell alone, input 22): JAX's would be that of the
+// positions before the drift.
+//
+// The drum shell (input 22; geometry.walls.DrumShell.evaluate): from the particle's x, y,
+// rho = sqrt(x^2 + y^2), the distance R - rho, the unit normal -e_rho with e_rho = (x, y) / rho
+// ((1, 0) where rho <= 1e-30) and the wall velocity omega e_z x (R e_rho), z components 0, with
+// the roundings of XLA's code for evaluate on x86-64: x^2 + y^2 as fma(x, x, y^2) (its code
+// generator fuses the sum so) and the quotient as (x, y) (1 / rho) (its simplifier turns a
+// quotient by one value per row into a product with the reciprocal); where XLA's code does not
+// fuse, the distance may differ by an ulp. The loop reads the positions anyway; in XLA the
+// shell's geometry was four passes over the particles per step, written out as (N, D) arrays
+// for the loop to read back.
 //
 // The coming step's skin test (inputs 20, 21; integrator.run_segments): the loop that steps
 // between neighbour rebuilds tests, before each step, whether the step's drift takes a particle
@@ -410,8 +448,14 @@ struct Tile {
 // C libraries (musl) lack; elsewhere the baseline version alone.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__)
 #define DRUMHEAT_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+// the pass that packs the particles' records (pack_range) compiled with and without the
+// processor's fused multiply-add: its explicit std::fma (the drift's and the drum shell's, as
+// XLA rounds them) is then one instruction instead of a call into the C library (the same
+// number either way)
+#define DRUMHEAT_FMA_CLONES __attribute__((target_clones("fma", "default")))
 #else
 #define DRUMHEAT_VECTOR_CLONES
+#define DRUMHEAT_FMA_CLONES
 #endif
 
 // the law of the tile's slots [0, cnt) (ROT: the torques, ROLL: rolling resistance, FH: what
@@ -677,11 +721,18 @@ struct Call {
   // reference positions (input 21); AH its output
   const void *ahead = nullptr, *ref = nullptr;
   void* AH = nullptr;
+  // shell: null, or the drum shell's R and omega (input 22: wall 0's geometry computed here)
+  const void* shell = nullptr;
+  bool* CW = nullptr;  // null, or whether each wall slot conducts (output 16)
+  // drift: null, or the constants of the step's kicks and drift (input 23) with the forces and
+  // torques of the step before (df, dtq, inputs 24-25); DX, DV, DWo: x', v', w' (outputs 17-19)
+  const void *drift = nullptr, *df = nullptr, *dtq = nullptr;
+  void *DX = nullptr, *DV = nullptr, *DWo = nullptr;
   void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX, *PW, *WW;
   double *Q, *R;
   bool* CD;
   int64_t n, m, nw, nt;
-  double dt, L, h, tol, cgap;
+  double dt, L, h, tol, cgap, wgap;
   int law;
   bool rot, fh;
 };
@@ -706,11 +757,18 @@ struct Loop {
   // values per particle, and the velocities, spins, masses and moments of inertia, VW values
   // per particle (x, v, w, r, ms, in above are the inputs in the particles' own numbering)
   const S *XRp = nullptr, *VWp = nullptr;
+  // with the drum shell (SH): each particle's distance from the z axis, where its data lie
+  // (pack_particles)
+  const S* RHO = nullptr;
   S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;  // OV, DI, FN null: not wanted
-  bool* CD;
+  bool *CD, *CW;
   const double* TK;
   bool heat_on, gap_on, rot, fh, one_type, roll_pp = false, roll_pw = false;
-  S dt, L, tol, cgap;
+  S dt, L, tol, cgap, wgap;
+  // the drum shell (input 22): wall 0's geometry computed here, the given geometry (inputs
+  // 9-11) of the walls 1 .. nw - 1 (ng of them per particle); else ng = nw
+  const S* SH = nullptr;
+  int64_t ng;
   std::vector<Law<S>> pp, pw;
 
   explicit Loop(const Call& c) : a(c), n(c.n), m(c.m), nw(c.nw), nt(c.nt) {
@@ -726,10 +784,12 @@ struct Loop {
     OV = static_cast<S*>(a.OV); DI = static_cast<S*>(a.DI); FN = static_cast<S*>(a.FN);
     WO = static_cast<S*>(a.WO); WF = static_cast<S*>(a.WF);
     PW = static_cast<S*>(a.PW); WW = static_cast<S*>(a.WW);
-    CD = a.CD;
+    CD = a.CD; CW = a.CW;
+    SH = static_cast<const S*>(a.shell);
+    ng = SH ? nw - 1 : nw;
     TK = a.temp;
     heat_on = a.law >= 0; gap_on = heat_on && a.tol > 0; rot = a.rot; fh = a.fh;
-    dt = S(a.dt); L = S(a.L); tol = S(a.tol); cgap = S(a.cgap);
+    dt = S(a.dt); L = S(a.L); tol = S(a.tol); cgap = S(a.cgap); wgap = S(a.wgap);
     pp = laws<S>(static_cast<const S*>(a.tpp), nt, nt);
     pw = laws<S>(static_cast<const S*>(a.tpw), nt, nw);
     one_type = nt == 1;
@@ -913,6 +973,19 @@ struct Loop {
     else pair_law_tile<S, D, false, false, FH>(t, cnt, dt);
   }
 
+  // the drum shell (input 22) at the particle at xp, rho from the z axis: the unit normal nr
+  // towards it, -e_rho, and the wall's velocity omega e_z x (R e_rho) (DrumShell.evaluate:
+  // e_rho = (1, 0) on the axis)
+  void shell_at(const S* xp, S rho, S* nr, S* wv) const {
+    const bool off = rho > S(1e-30);
+    const S inv = S(1) / (off ? rho : S(1));  // (header: XLA's roundings)
+    const S ex = off ? xp[0]*inv : S(1), ey = off ? xp[1]*inv : S(0);
+    const S R = SH[0], om = SH[1];
+    nr[0] = -ex; nr[1] = -ey;
+    wv[0] = (-om)*(R*ey); wv[1] = om*(R*ex);
+    if constexpr (D == 3) { nr[2] = S(0); wv[2] = S(0); }
+  }
+
   // walls: partner A is the wall (spin omega_wall about z, infinite mass), B the particle
   S walls(int64_t s0, int64_t s1, S* F, S* T, double* R) const {
     S max_ov = S(0);
@@ -924,7 +997,12 @@ struct Loop {
     if (fh) for (int c = 0; c < KW; ++c) hw[c] = S(0);
     const S* u = VWp + VW*p;  // its velocity, spin, mass and moment of inertia
     const S rp = XRp[XR*p + D];
-    const S ov = rp - WD[q];
+    const bool sh = SH && wl == 0;  // the drum shell's slot: its geometry computed here
+    const int64_t g = pu*ng + wl - (SH ? 1 : 0);  // else the slot of its given geometry
+    const S* xp = XRp + XR*p;
+    const S rho = sh ? RHO[p] : S(0);
+    const S ov = rp - (sh ? SH[0] - rho : WD[g]);
+    if (CW) CW[q] = wgap > S(0) ? ov >= -(wgap*(S(2)*rp)) : ov > S(0);
     const Law<S>& law = pw[(one_type ? 0 : pt[pu])*nw + wl];
     const S xi2 = fh ? dot<S, D>(so, so) : S(0);
     const S ov0 = fh ? rp - WD0[q] : S(0);  // the walls before the step, from JAX
@@ -934,12 +1012,15 @@ struct Loop {
       clear<S, D>(s);
       continue;
     }
-    const S* nr = WN + D*q;
+    S nb[D], vb[D];  // the shell's normal and velocity at the particle
+    if (sh) shell_at(xp, rho, nb, vb);
+    const S* nr = sh ? nb : WN + D*g;
+    const S* wv = sh ? vb : WV + D*g;
     const S l = -(rp - S(0.5)*ov);
     S al[D], cw[D], vr[D], f[D], M[DW] = {};
     for (int c = 0; c < D; ++c) al[c] = l*nr[c];
     spin_cross<S, D>(u + D, al, cw);
-    for (int c = 0; c < D; ++c) vr[c] = u[c] + cw[c] - WV[D*q + c];
+    for (int c = 0; c < D; ++c) vr[c] = u[c] + cw[c] - wv[c];
     S loss[2];
     const S fn = contact<S, D>(law, dt, nr, ov, vr, u[D + DW], so, s, f, fh ? loss : nullptr);
     if (fh) { R[0] += double(loss[0]); R[1] += double(loss[1]); }
@@ -1021,6 +1102,40 @@ void gather_temperatures(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp, cons
   lp.RK = lay.rank(buf);
 }
 
+// The step's kicks and drift (inputs 23-25, see the header): step(i) writes particle i's x', v'
+// and w' (outputs 17-19) from its x, v, w (inputs 0-2) and the step before's forces and torques.
+template <typename S, int D>
+struct Drift {
+  static constexpr int DW = D == 3 ? 3 : 1;
+  bool on;
+  S a = S(0), c = S(0), ci = S(0), dt = S(0), L = S(0);
+  const S *x, *v, *w, *F, *M;
+  S *X, *V, *W;
+  explicit Drift(const Call& k)
+      : on(k.drift != nullptr), x(static_cast<const S*>(k.x)), v(static_cast<const S*>(k.v)),
+        w(static_cast<const S*>(k.w)), F(static_cast<const S*>(k.df)),
+        M(static_cast<const S*>(k.dtq)), X(static_cast<S*>(k.DX)), V(static_cast<S*>(k.DV)),
+        W(static_cast<S*>(k.DWo)) {
+    if (!on) return;
+    const S* q = static_cast<const S*>(k.drift);
+    a = q[0]; c = q[1]; ci = q[2]; dt = q[3]; L = q[4];
+  }
+  __attribute__((always_inline)) inline void step(int64_t i, bool rot) const {
+    for (int q = 0; q < D; ++q) {
+      const S f = F[D*i + q];
+      const S u = std::fma(f, c, std::fma(a*f, c, v[D*i + q]));  // the two half-kicks
+      S y = std::fma(u, dt, x[D*i + q]);
+      if (q == D - 1 && L > S(0)) y = y >= L ? y - L : (y < S(0) ? y + L : y);
+      V[D*i + q] = u;
+      X[D*i + q] = y;
+    }
+    for (int q = 0; q < DW; ++q) {
+      const S t = M[DW*i + q], s = w[DW*i + q];
+      W[DW*i + q] = rot ? std::fma(t, ci, std::fma(a*t, ci, s)) : s;
+    }
+  }
+};
+
 // The particles' data packed into records, in the cell order `od` (null: their own numbering),
 // in one buffer from the pool: the positions and radii XR values per particle, (x_0 .. x_{D-1},
 // r, 0 ...), read by the scan for both partners of every listed pair, and the velocities, spins,
@@ -1028,35 +1143,51 @@ void gather_temperatures(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp, cons
 // reach and by the walls: each partner's come from one cache line instead of from one per
 // array, and the one copy lays them out in the cell order too. lp.XRp and lp.VWp are set to
 // them; the caller gives the buffer back when the loop is done.
+// the records of the particles whose data lie at [p0, p1) (pack_particles), after the step's
+// kicks and drift (dr), and with the drum shell their distance from the z axis
+template <typename S, int D>
+DRUMHEAT_FMA_CLONES void pack_range(const Loop<S, D>& lp, const Drift<S, D>& dr,
+                                    const int32_t* od, int64_t p0, int64_t p1, S* xr, S* vw,
+                                    S* rho) {
+  constexpr int DW = Loop<S, D>::DW;
+  const S *x = lp.x, *r = lp.r, *v = lp.v, *w = lp.w, *ms = lp.ms, *in = lp.in;
+  const int64_t sr = lp.a.r_step, sm = lp.a.ms_step, si = lp.a.in_step;
+  for (int64_t p = p0; p < p1; ++p) {
+    const int64_t i = od ? od[p] : p;  // the particle whose data lie at p
+    if (dr.on) dr.step(i, lp.rot);  // x', v', w' of particle i (in place: read, then written)
+    const S *xi = dr.on ? dr.X : x, *vi = dr.on ? dr.V : v, *wi = dr.on ? dr.W : w;
+    S* a = xr + XR*p;
+    for (int q = 0; q < D; ++q) a[q] = xi[D*i + q];
+    a[D] = r[sr*i];
+    for (int q = D + 1; q < XR; ++q) a[q] = S(0);
+    S* u = vw + VW*p;
+    for (int q = 0; q < D; ++q) u[q] = vi[D*i + q];
+    for (int q = 0; q < DW; ++q) u[D + q] = wi[DW*i + q];
+    u[D + DW] = ms[sm*i];
+    u[D + DW + 1] = in[si*i];
+    for (int q = D + DW + 2; q < VW; ++q) u[q] = S(0);
+    if (rho) rho[p] = std::sqrt(std::fma(a[0], a[0], a[1]*a[1]));  // (header: the shell)
+  }
+}
+
 template <typename S, int D>
 std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp,
                                        const int32_t* od) {
   constexpr int DW = Loop<S, D>::DW;
   static_assert(D + 1 <= XR && D + DW + 2 <= VW, "a record holds the particle's data");
   const int64_t n = lp.n;
-  std::unique_ptr<Buffer> buf =
-      take_buffer((static_cast<int64_t>(sizeof(S))*(XR + VW)*n + 7)/8);
+  const int64_t k = lp.SH ? XR + VW + 1 : XR + VW;  // values per particle
+  std::unique_ptr<Buffer> buf = take_buffer((static_cast<int64_t>(sizeof(S))*k*n + 7)/8);
   S* xr = reinterpret_cast<S*>(buf->data());
   S* vw = xr + XR*n;
-  const S *x = lp.x, *r = lp.r, *v = lp.v, *w = lp.w, *ms = lp.ms, *in = lp.in;
-  const int64_t sr = lp.a.r_step, sm = lp.a.ms_step, si = lp.a.in_step;
+  S* rho = lp.SH ? vw + VW*n : nullptr;
+  const Drift<S, D> dr(lp.a);
   for_chunks(pool, nc, [&](int c) {
-    for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) {
-      const int64_t i = od ? od[p] : p;  // the particle whose data lie at p
-      S* a = xr + XR*p;
-      for (int q = 0; q < D; ++q) a[q] = x[D*i + q];
-      a[D] = r[sr*i];
-      for (int q = D + 1; q < XR; ++q) a[q] = S(0);
-      S* u = vw + VW*p;
-      for (int q = 0; q < D; ++q) u[q] = v[D*i + q];
-      for (int q = 0; q < DW; ++q) u[D + q] = w[DW*i + q];
-      u[D + DW] = ms[sm*i];
-      u[D + DW + 1] = in[si*i];
-      for (int q = D + DW + 2; q < VW; ++q) u[q] = S(0);
-    }
+    pack_range<S, D>(lp, dr, od, n*c/nc, n*(c + 1)/nc, xr, vw, rho);
   });
   lp.XRp = xr;
   lp.VWp = vw;
+  lp.RHO = rho;
   return buf;
 }
 
@@ -1068,7 +1199,9 @@ struct Ahead {
   S c = S(0), dt = S(0), L = S(0), inv_L = S(0), lo[D] = {};
   const S *x, *v, *ref;
   explicit Ahead(const Call& a)
-      : on(a.ahead != nullptr), x(static_cast<const S*>(a.x)), v(static_cast<const S*>(a.v)),
+      : on(a.ahead != nullptr),
+        x(static_cast<const S*>(a.drift ? a.DX : a.x)),  // this call's positions and velocities
+        v(static_cast<const S*>(a.drift ? a.DV : a.v)),
         ref(static_cast<const S*>(a.ref)) {
     if (!on) return;
     const S* k = static_cast<const S*>(a.ahead);
@@ -1302,8 +1435,10 @@ static ffi::Error ContactsImpl(
     ffi::AnyBuffer wvel, ffi::AnyBuffer wspring, ffi::AnyBuffer tab_pp, ffi::AnyBuffer tab_pw,
     ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, ffi::AnyBuffer wdist0,
     ffi::Buffer<ffi::S32> order, ffi::AnyBuffer body, ffi::AnyBuffer ahead, ffi::AnyBuffer ref,
+    ffi::AnyBuffer shell, ffi::AnyBuffer drift, ffi::AnyBuffer dforce, ffi::AnyBuffer dtorque,
     double dt,
     double L, int32_t law, double h, double tol, int32_t rot, int32_t fh, double cgap,
+    double wgap,
     ffi::Result<ffi::AnyBuffer> force, ffi::Result<ffi::AnyBuffer> torque,
     ffi::Result<ffi::AnyBuffer> nspring, ffi::Result<ffi::AnyBuffer> ovl_out,
     ffi::Result<ffi::AnyBuffer> dist_out, ffi::Result<ffi::AnyBuffer> fn_out,
@@ -1312,19 +1447,21 @@ static ffi::Error ContactsImpl(
     ffi::ResultBuffer<ffi::F64> heat, ffi::ResultBuffer<ffi::PRED> conducts,
     ffi::Result<ffi::AnyBuffer> pair_rows,
     ffi::Result<ffi::AnyBuffer> wall_rows, ffi::ResultBuffer<ffi::F64> rates,
-    ffi::Result<ffi::AnyBuffer> ahead_out) {
+    ffi::Result<ffi::AnyBuffer> ahead_out, ffi::ResultBuffer<ffi::PRED> wall_conducts,
+    ffi::Result<ffi::AnyBuffer> dpos, ffi::Result<ffi::AnyBuffer> dvel,
+    ffi::Result<ffi::AnyBuffer> domg) {
   const ffi::DataType et = pos.element_type();
   if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
     return ffi::Error::InvalidArgument("drumheat_contacts: positions must be f32 or f64");
   for (const ffi::AnyBuffer* b : {&vel, &omg, &rad, &mass, &inertia, &spring, &wdist, &wnrm,
                                   &wvel, &wspring, &tab_pp, &tab_pw, &wall_omega, &wdist0,
-                                  &body, &ahead, &ref})
+                                  &body, &ahead, &ref, &shell, &drift, &dforce, &dtorque})
     if (b->element_type() != et)
       return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
   for (ffi::Result<ffi::AnyBuffer>* b : {&force, &torque, &nspring, &ovl_out, &dist_out,
                                                &fn_out, &nwspring, &wovl_out, &wfn_out,
                                                &max_ratio, &pair_rows, &wall_rows,
-                                               &ahead_out})
+                                               &ahead_out, &dpos, &dvel, &domg})
     if ((*b)->element_type() != et)
       return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
   const auto pd = pos.dimensions();
@@ -1353,7 +1490,8 @@ static ffi::Error ContactsImpl(
   a.PW = pair_rows->untyped_data(); a.WW = wall_rows->untyped_data(); a.R = rates->typed_data();
   a.n = pd[0];
   a.m = pairs.dimensions()[1];
-  a.nw = wdist.dimensions().size() > 1 ? wdist.dimensions()[1] : 0;
+  const auto wsd = wspring.dimensions();
+  a.nw = wsd.size() > 1 ? wsd[1] : 0;
   a.nt = tab_pp.dimensions()[1];
   // radius, mass, inertia: one per particle, or one for all (stride 0); the types: one per
   // particle, or none read with one type
@@ -1370,7 +1508,40 @@ static ffi::Error ContactsImpl(
     return ffi::Error::InvalidArgument("drumheat_contacts: the types must have length N "
                                        "(or any with one type)");
   a.dt = dt; a.L = L; a.h = h; a.tol = tol; a.law = law; a.rot = rot != 0; a.fh = fh != 0;
-  a.cgap = cgap;
+  a.cgap = cgap; a.wgap = wgap;
+  // the geometry given for the walls: all W, or W - 1 with the drum shell (wall 0)
+  const bool with_shell = shell.element_count() != 0;
+  if (with_shell && (shell.element_count() != 2 || a.nw < 1 || a.fh))
+    return ffi::Error::InvalidArgument("drumheat_contacts: the drum shell takes (R, omega) and "
+                                       "a first wall, without friction heat");
+  const int64_t ng = with_shell ? a.nw - 1 : a.nw;
+  const int64_t gd = wdist.dimensions().size() > 1 ? wdist.dimensions()[1] : 0;
+  if (static_cast<int64_t>(wdist.element_count()) != a.n * ng || (a.n && gd != ng) ||
+      static_cast<int64_t>(wnrm.element_count()) != a.n * ng * dim ||
+      static_cast<int64_t>(wvel.element_count()) != a.n * ng * dim)
+    return ffi::Error::InvalidArgument("drumheat_contacts: the wall geometry must be given for "
+                                       "every wall but the drum shell");
+  a.shell = with_shell ? shell.untyped_data() : nullptr;
+  const int64_t ncw = static_cast<int64_t>(wall_conducts->element_count());
+  if (ncw != 0 && ncw != a.n * a.nw)
+    return ffi::Error::InvalidArgument("drumheat_contacts: the wall slots' conduction flags "
+                                       "must be (N, W) or of length 0");
+  a.CW = ncw ? wall_conducts->typed_data() : nullptr;
+  if (drift.element_count() != 0) {
+    const int64_t nd = a.n * dim, nr = a.n * (dim == 3 ? 3 : 1);
+    if (drift.element_count() != 5 || static_cast<int64_t>(dforce.element_count()) != nd ||
+        static_cast<int64_t>(dtorque.element_count()) != nr ||
+        static_cast<int64_t>(dpos->element_count()) != nd ||
+        static_cast<int64_t>(dvel->element_count()) != nd ||
+        static_cast<int64_t>(domg->element_count()) != nr)
+      return ffi::Error::InvalidArgument("drumheat_contacts: the step's drift takes 5 constants, "
+                                         "the forces and torques before, and three outputs");
+    if (a.fh || !(a.nw == 0 || (with_shell && a.nw == 1)))
+      return ffi::Error::InvalidArgument("drumheat_contacts: the step's drift takes no walls "
+                                         "but the drum shell, and no friction heat");
+    a.drift = drift.untyped_data(); a.df = dforce.untyped_data(); a.dtq = dtorque.untyped_data();
+    a.DX = dpos->untyped_data(); a.DV = dvel->untyped_data(); a.DWo = domg->untyped_data();
+  }
   const int dw = dim == 3 ? 3 : 1;
   if (a.fh && (static_cast<int64_t>(pair_rows->element_count()) != a.m * (3*dim + dw + 1) ||
                static_cast<int64_t>(wall_rows->element_count()) != a.n * a.nw * (2*dim + dw + 1) ||
@@ -1418,14 +1589,17 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
+        .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Attr<double>("dt").Attr<double>("L").Attr<int32_t>("law").Attr<double>("h")
         .Attr<double>("tol").Attr<int32_t>("rot").Attr<int32_t>("fh").Attr<double>("cgap")
+        .Attr<double>("wgap")
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>().Ret<ffi::Buffer<ffi::PRED>>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>()
-        .Ret<ffi::AnyBuffer>());
+        .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::PRED>>()
+        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>());
 
 // The friction heat's second pass (ContactHeat; see the header).
 static ffi::Error ContactHeatImpl(

@@ -309,7 +309,8 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
              wall_normal, wall_velocity, wall_spring, *, tables_pp, tables_pw, wall_omega, dt,
              periodic_length=None, rotation=True, temperature=None, conduction_law=None,
              conduction_h=0.0, gap_tolerance=0.0, wall_distance_before=None,
-             pair_gap=0.0, order=None, details=True, body_force=None, ahead=None):
+             pair_gap=0.0, order=None, details=True, body_force=None, ahead=None, shell=None,
+             wall_gap=None, drift=None):
     """Particle-particle and particle-wall contact forces in one C++ loop.
 
     The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
@@ -325,7 +326,8 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
       wall_distance: (N, W) distance of each particle centre from each wall; wall_normal:
         (N, W, D) unit normal from the wall towards the particle; wall_velocity: (N, W, D)
         velocity of the wall surface at the particle (the three outputs of each wall's
-        ``evaluate``, stacked over the walls); wall_spring: (N, W, D) tangential springs.
+        ``evaluate``, stacked over the walls; with ``shell``, of the walls 1 .. W - 1 only);
+        wall_spring: (N, W, D) tangential springs.
       tables_pp, tables_pw, wall_omega, dt, periodic_length, rotation: from
         :func:`kernel_params`.
       temperature, conduction_law, conduction_h, gap_tolerance: with a law (``"projected"`` or
@@ -355,10 +357,25 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         reference positions (N, D)): the loop also returns the largest squared displacement
         from them after the coming step's two half-kicks and drift, for particles of one mass
         (contact_kernel.cc, the coming step's skin test).
+      shell: None, or ``(R, omega)`` of a drum shell that is wall 0
+        (:class:`drumheat.geometry.walls.DrumShell`: radius, m, and angular velocity, rad/s):
+        the loop computes its distance, normal and velocity at each particle from the
+        positions, with ``DrumShell.evaluate``'s arithmetic, and the wall geometry arguments
+        cover the other walls. Not with ``wall_distance_before`` (friction heat).
+      wall_gap: None, or the gap tolerance of the wall slots' conduction flags (times the
+        particle's diameter; 0: the slots that touch), returned as ``wall_conducts``.
+      drift: None, or ``(constants, force, torque)`` of the step's kicks and drift
+        (:func:`drift_constants`; the forces (N, D) and torques of the step before): ``pos``,
+        ``vel`` and ``omega`` are then the step before's, its velocities and spins with
+        ``a`` times its last half-kick pending, and the loop first makes the step's two
+        half-kicks and drift, for particles of one mass and moment of inertia, with XLA's
+        roundings of the integrator's, and computes the contacts at the new positions and
+        velocities, returned as ``drifted`` (contact_kernel.cc, the step's kicks and drift).
+        Walls: none, or the drum shell alone (``shell``); not with ``wall_distance_before``.
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
     wall_overlap, wall_normal_force, max_overlap, heat, conducts, pair_rows, wall_rows,
-    rates, ahead)``: contact forces (N, D) and torques (N, 3) or (N,) on the particles (torques zero
+    rates, ahead, wall_conducts, drifted)``: contact forces (N, D) and torques (N, 3) or (N,) on the particles (torques zero
     without ``rotation``); per pair the new springs (M, D), overlap, centre distance and normal
     force (M, or length 0 without ``details``); per wall slot the new springs (N, W, D), overlap
     and normal force (N, W); all zero where nothing touches; the largest overlap / radius (the
@@ -369,7 +386,12 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
     ``wall_distance_before`` (else length 0) each contact's friction-heat row (pairs (M, K_p),
     wall slots (N W, K_w): force on B, levers, rolling torque, ``U_new - U_old``) and the step's
     losses at the continuous rates (3,) float64, J: damping, sliding, rolling; with ``ahead``
-    (else length 0) the coming step's largest squared displacement (1,), m^2.
+    (else length 0) the coming step's largest squared displacement (1,), m^2; with
+    ``wall_gap`` (else length 0) whether each wall slot conducts (N, W) bool: it touches, or
+    its surface gap is at most ``wall_gap`` times the particle's diameter
+    (:meth:`drumheat.mechanics.forces.ContactForces.wall_gap_mask`, the same test); with
+    ``drift`` (else None) the positions, velocities and spins after the step's kicks and drift
+    ``(pos, vel, omega)``, updated in place.
     """
     target = load()
     dtype = jnp.dtype(pos.dtype)
@@ -377,7 +399,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         dtype = jnp.dtype(jnp.float32)
     n, dim = pos.shape
     m = idx.shape[1]
-    nw = wall_distance.shape[1]
+    nw = wall_spring.shape[1]
     sd = jax.ShapeDtypeStruct
     wshape = (n, 3) if dim == 3 else (n,)
     md = m if details else 0
@@ -395,21 +417,35 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
     fh = wall_distance_before is not None
     kp, kw = _rows(dim)
     outs += [sd((m, kp) if fh else (0,), dtype), sd((n * nw, kw) if fh else (0,), dtype),
-             sd((3,), jnp.float64), sd((1,) if ahead is not None else (0,), dtype)]
+             sd((3,), jnp.float64), sd((1,) if ahead is not None else (0,), dtype),
+             sd((n, nw) if wall_gap is not None else (0,), jnp.bool_)]
+    outs += [sd((n, dim) if drift is not None else (0,), dtype),
+             sd((n, dim) if drift is not None else (0,), dtype),
+             sd(wshape if drift is not None else (0,), dtype)]
     wd0 = wall_distance_before if fh else jnp.zeros((0,))
     body = jnp.zeros((0,)) if body_force is None else body_force
     consts, ref = (jnp.zeros((0,)), jnp.zeros((0,))) if ahead is None else ahead
+    shell = jnp.zeros((0,)) if shell is None else np.asarray(shell, dtype)
+    none = jnp.zeros((0,))
+    kick, f_before, t_before = (none, none, none) if drift is None else drift
     c = lambda a: jnp.asarray(a).astype(dtype)  # noqa: E731
-    # springs updated in place: input 8 -> output 2 (pairs), input 12 -> output 6 (walls)
-    return jax.ffi.ffi_call(target, outs, input_output_aliases={8: 2, 12: 6})(
+    # springs updated in place: input 8 -> output 2 (pairs), input 12 -> output 6 (walls); with
+    # the drift the positions, velocities and spins (inputs 0-2 -> outputs 17-19) and the forces
+    # and torques, which the loop reads before it sums the new ones (24, 25 -> 0, 1): a loop's
+    # carry is then updated in place, without XLA's copies of each
+    aliases = {8: 2, 12: 6} | ({0: 17, 1: 18, 2: 19, 24: 0, 25: 1} if drift is not None else {})
+    out = jax.ffi.ffi_call(target, outs, input_output_aliases=aliases)(
         c(pos), c(vel), c(omega).reshape(wshape), c(radius), c(mass), c(inertia),
         jnp.asarray(ptype).astype(jnp.int32), idx.astype(jnp.int32), c(spring),
         c(wall_distance), c(wall_normal), c(wall_velocity), c(wall_spring), c(tables_pp),
         c(tables_pw), c(wall_omega), temperature.astype(jnp.float64), c(wd0),
-        _order_arg(order), c(body), c(consts), c(ref),
+        _order_arg(order), c(body), c(consts), c(ref), c(shell), c(kick), c(f_before),
+        c(t_before).reshape(wshape if drift is not None else (0,)),
         dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
         h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
-        rot=np.int32(bool(rotation)), fh=np.int32(fh), cgap=np.float64(pair_gap))
+        rot=np.int32(bool(rotation)), fh=np.int32(fh), cgap=np.float64(pair_gap),
+        wgap=np.float64(wall_gap or 0.0))
+    return (*out[:17], tuple(out[17:]) if drift is not None else None)
 
 
 def skin_test_constants(dt, inv_mass, periodic_length, lo, dtype):
@@ -422,6 +458,17 @@ def skin_test_constants(dt, inv_mass, periodic_length, lo, dtype):
     vals = [one(0.5 * dt) * one(inv_mass), one(dt), L, one(1.0) / L if L else one(0.0),
             *np.asarray(lo, dtype)]
     return jnp.asarray(np.array(vals, dtype))
+
+
+def drift_constants(aux, dt, inv_mass, inv_inertia, periodic_length, dtype):
+    """The constants of :func:`contacts`' kicks and drift (``drift``) as the loop takes them:
+    the pending half-kick's factor ``aux`` (0 or 1, traced), ``c = (dt / 2) (1 / m)`` and
+    ``c_I = (dt / 2) (1 / I)`` (the products XLA folds the integrator's ``dt/2 F (1/m)`` and
+    ``dt/2 M (1/I)`` into), dt and the period L of the last axis (0: none), in ``dtype``."""
+    one = lambda v: np.asarray(v, dtype)  # noqa: E731  a constant as XLA holds it
+    rest = np.array([one(0.5 * dt) * one(inv_mass), one(0.5 * dt) * one(inv_inertia), one(dt),
+                     one(periodic_length or 0.0)], dtype)
+    return jnp.concatenate([jnp.asarray(aux, dtype).reshape(1), jnp.asarray(rest)])
 
 
 def _order_arg(order):

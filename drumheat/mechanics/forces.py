@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from drumheat.geometry.walls import rpm_to_omega
+from drumheat.geometry.walls import DrumShell, rpm_to_omega
 from drumheat.mechanics.conduction import PairConduction
 from drumheat.mechanics.conduction import heat_flow as pair_heat_flow
 from drumheat.mechanics.contact_forces import (
@@ -107,7 +107,9 @@ class ForceResult(NamedTuple):
     the per-step pair conduction (None without it); work: with friction heat, what the
     contacts leave for :meth:`ContactForces.dissipation` (None without it); ahead: the coming
     step's largest squared displacement from the list's reference positions, m^2, where the
-    call was asked for it (:attr:`ContactForces.looks_ahead`; else None).
+    call was asked for it (:attr:`ContactForces.looks_ahead`; else None); drifted: the
+    positions, half-step velocities and spins ``(x, v, w)`` of the step's kicks and drift,
+    where the call made them (:attr:`ContactForces.drifts`; else None).
     """
 
     force: jax.Array
@@ -119,6 +121,7 @@ class ForceResult(NamedTuple):
     heat: Optional[jax.Array]
     work: Optional[ContactWork | KernelWork] = None
     ahead: Optional[jax.Array] = None
+    drifted: Optional[tuple] = None
 
 
 def _materialize(tree, pred):
@@ -219,9 +222,12 @@ class ContactForces:
     # -- the one signature ---------------------------------------------------------------------
     #: whether :meth:`__call__` takes ``ahead`` (the coming step's skin test in the call)
     looks_ahead: bool = False
+    #: whether :meth:`__call__` takes ``drift`` (the step's kicks and drift in the call)
+    drifts: bool = False
 
     def __call__(self, pos, vel, w, t, nbrs, pair_spring, wall_spring,
-                 temperature=None, details: bool | None = None, ahead=None) -> ForceResult:
+                 temperature=None, details: bool | None = None, ahead=None,
+                 drift=None) -> ForceResult:
         """Forces and torques at ``pos`` with the velocities ``vel``, ``w`` (the half-step ones
         in the Verlet step: the dashpots and the spring increment use them, as LIGGGHTS does).
         ``temperature`` (N,) K: for the per-step pair conduction, if the system has one.
@@ -230,12 +236,18 @@ class ContactForces:
         ``pair_details`` of the constructor. ``ahead``: where :attr:`looks_ahead`, the
         constants of the coming step's skin test
         (:func:`~drumheat.mechanics.cpu_kernel.skin_test_constants`); the result's ``ahead``
-        then holds its largest squared displacement from ``nbrs.reference_position``."""
+        then holds its largest squared displacement from ``nbrs.reference_position``.
+        ``drift``: where :attr:`drifts`, ``(constants, force, torque)`` of the step's kicks and
+        drift (:func:`~drumheat.mechanics.cpu_kernel.drift_constants`, the forces and torques
+        of the step before): ``pos``, ``vel``, ``w`` are then the step before's and the call
+        first kicks and drifts them (the result's ``drifted``)."""
         if ahead is not None and not self.looks_ahead:
             raise ValueError(f"{type(self).__name__} makes no skin test of the coming step")
+        if drift is not None and not self.drifts:
+            raise ValueError(f"{type(self).__name__} makes no kicks and drift")
         details = self.pair_details if details is None else details
         res = self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature,
-                             details, ahead)
+                             details, ahead, drift)
         if details:
             return res
         return res._replace(contacts=res.contacts._replace(
@@ -261,10 +273,11 @@ class ContactForces:
                     state.nbrs, state.pair_spring, state.wall_spring, details=True)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
-                  ahead) -> ForceResult:  # pragma: no cover - abstract
+                  ahead, drift) -> ForceResult:  # pragma: no cover - abstract
         """The forces (gravity included, :meth:`gravity`) and contacts; ``details`` False: the
-        caller drops the per-pair details (a kernel may skip computing them); ``ahead``: as
-        :meth:`__call__` (None where the class does not :attr:`looks_ahead`)."""
+        caller drops the per-pair details (a kernel may skip computing them); ``ahead``,
+        ``drift``: as :meth:`__call__` (None where the class does not :attr:`looks_ahead`,
+        :attr:`drifts`)."""
         raise NotImplementedError
 
     def gravity(self, mass):
@@ -287,13 +300,14 @@ class ContactForces:
         tab = jnp.broadcast_to(tab.astype(self.dtype), (self.params.n_types, self.n_w))
         return tab[0][None, :] if self.single_type else tab[self.ptype]
 
-    def wall_geometry(self, pos, t):
-        """Distance (N, W), unit normal towards the particle and wall velocity (N, W, dim)."""
+    def wall_geometry(self, pos, t, first: int = 0):
+        """Distance (N, W), unit normal towards the particle and wall velocity (N, W, dim);
+        of the walls from ``first`` on."""
         n, dim, dtype = self.n, self.dim, self.dtype
-        if self.n_w == 0:
+        if self.n_w <= first:
             return (jnp.zeros((n, 0), dtype), jnp.zeros((n, 0, dim), dtype),
                     jnp.zeros((n, 0, dim), dtype))
-        evs = [wl.evaluate(pos, t) for wl in self.walls]
+        evs = [wl.evaluate(pos, t) for wl in self.walls[first:]]
         return tuple(jnp.stack([e[k] for e in evs], axis=1).astype(dtype) for k in range(3))
 
     def pair_gap_mask(self, pos, i, j):
@@ -330,6 +344,17 @@ class ContactForces:
         w_id = jnp.tile(jnp.asarray(self.wall_ids), n)
         return (w_part, w_idx, w_id, wact.reshape(-1), jnp.where(wact, wovl, 0.0).reshape(-1),
                 wfn.reshape(-1))
+
+    def record(self, i, j, active, overlap, distance, normal_force, pair_conducts, slots,
+               wall_conducts) -> Contacts:
+        """The step's :class:`Contacts` from the pairs ``(i, j)`` and their fields and the wall
+        slots' fields (``slots``, :meth:`wall_slots`)."""
+        w_part, w_idx, w_id, w_mask, w_ovl, w_fn = slots
+        return Contacts(
+            pair_i=i, pair_j=j, pair_mask=active, pair_overlap=overlap, pair_distance=distance,
+            pair_normal_force=normal_force, wall_particle=w_part, wall_index=w_idx,
+            wall_id=w_id, wall_mask=w_mask, wall_overlap=w_ovl, wall_normal_force=w_fn,
+            pair_conducts=pair_conducts, wall_conducts=wall_conducts)
 
     def elastic_energy(self, c: Contacts, pair_spring, wall_spring):
         """Energy in the normal and tangential springs of the touching contacts ``c``, J:
@@ -368,7 +393,7 @@ class JaxContactForces(ContactForces):
     one scatter of forces and torques), walls as an (N, W) block."""
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
-                  ahead) -> ForceResult:
+                  ahead, drift) -> ForceResult:
         n, gap_pp, radius = self.n, self.gap_pp, self.radius
         i, j = nbrs.idx[0], nbrs.idx[1]
         force, torque = self.gravity(self.mass), jnp.zeros_like(w)  # the sums start from them
@@ -386,12 +411,8 @@ class JaxContactForces(ContactForces):
         work = None
         if self.friction_heat is not None:
             work = ContactWork(i, j, *pair_work, *wall_work)
-        w_part, w_idx, w_id, w_mask, w_ovl, w_fn = slots
-        contacts = Contacts(
-            pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
-            pair_normal_force=fn, wall_particle=w_part, wall_index=w_idx, wall_id=w_id,
-            wall_mask=w_mask, wall_overlap=w_ovl, wall_normal_force=w_fn, pair_conducts=p_cond,
-            wall_conducts=self.wall_gap_mask(wd, w_mask))
+        contacts = self.record(i, j, active, ovl, dist, fn, p_cond, slots,
+                               self.wall_gap_mask(wd, slots[3]))
         heat = None
         c = self.conduction
         if c is not None and temperature is not None:
@@ -543,7 +564,15 @@ class JaxContactForces(ContactForces):
 
 class CpuContactForces(ContactForces):
     """Pairs and walls in one C++ loop (:mod:`drumheat.mechanics.cpu_kernel`), the wall
-    geometry from JAX; the kernel's per-slot outputs are already zero where nothing touches."""
+    geometry from JAX but a drum shell's (:attr:`shell`); the kernel's per-slot outputs are
+    already zero where nothing touches."""
+
+    #: ``(R, omega)`` of a drum shell that is the first wall, whose geometry the C++ loop
+    #: computes from the positions it reads anyway (``cpu_kernel.contacts(shell=...)``: in XLA,
+    #: four passes over the particles per step, written out for the loop to read back); None
+    #: where the first wall is none, or with friction heat (whose second pass reads the walls'
+    #: velocities from JAX)
+    shell: Optional[tuple[float, float]] = None
 
     def __init__(self, *args, batch_axis=None, **kw):
         super().__init__(*args, **kw)
@@ -568,11 +597,20 @@ class CpuContactForces(ContactForces):
         self._body_force = self.gravity(m)
         # the coming step's skin test in the loop: its kick c F takes one mass for all
         self.looks_ahead = m.shape == (1,)
+        self.shell = _shell_of(self.walls, self.friction_heat)
+        # the step's kicks and drift in the loop: one mass and moment of inertia (its kicks'
+        # c F, c_I M), and the walls' geometry the loop's own (none, or the shell alone)
+        self.drifts = (self.looks_ahead and cpu_kernel.uniform_or_all(self.inertia).shape == (1,)
+                       and (self.n_w == 0 or (self.shell is not None and self.n_w == 1))
+                       and self.friction_heat is None)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
-                  ahead) -> ForceResult:
+                  ahead, drift) -> ForceResult:
         i, j = nbrs.idx[0], nbrs.idx[1]
-        wd, wn, wv = self.wall_geometry(pos, t)
+        # the shell's geometry in the loop where it reads the positions given (not the wider
+        # ones of mixed precision, whose walls JAX evaluates before rounding)
+        shell = self.shell if pos.dtype == self.dtype else None
+        wd, wn, wv = self.wall_geometry(pos, t, first=0 if shell is None else 1)
         heat_args = {}
         c = self.conduction
         if c is not None and temperature is not None:
@@ -582,19 +620,16 @@ class CpuContactForces(ContactForces):
             heat_args["wall_distance_before"] = self.wall_geometry(pos - self.dt_c * vel,
                                                                    t - self.dt)[0]
         (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, p_cond,
-         pair_rows, wall_rows, rates, moved) = self._kernel.contacts(
+         pair_rows, wall_rows, rates, moved, w_cond, drifted) = self._kernel.contacts(
             self.pair_positions(pos), vel, w, *self._kernel_particles, nbrs.idx, pair_spring,
             wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
             pair_gap=self.gap_pp, order=nbrs.order, details=details, body_force=self._body_force,
-            ahead=None if ahead is None else (ahead, nbrs.reference_position))
-        active = ovl > 0
-        w_part, w_idx, w_id, w_mask, w_ovl, w_fn = self.wall_slots(w_ovl > 0, w_ovl, w_fn)
-        # p_cond: the pairs within the conduction gap, pair_gap_mask's test in the C++ loop
-        contacts = Contacts(
-            pair_i=i, pair_j=j, pair_mask=active, pair_overlap=ovl, pair_distance=dist,
-            pair_normal_force=fn, wall_particle=w_part, wall_index=w_idx, wall_id=w_id,
-            wall_mask=w_mask, wall_overlap=w_ovl, wall_normal_force=w_fn, pair_conducts=p_cond,
-            wall_conducts=self.wall_gap_mask(wd, w_mask))
+            ahead=None if ahead is None else (ahead, nbrs.reference_position), shell=shell,
+            wall_gap=self.gap_pw, drift=drift)
+        # p_cond, w_cond: the pairs and wall slots within the conduction gap, pair_gap_mask's
+        # and wall_gap_mask's tests in the C++ loop
+        contacts = self.record(i, j, ovl > 0, ovl, dist, fn, p_cond,
+                               self.wall_slots(w_ovl > 0, w_ovl, w_fn), w_cond.reshape(-1))
         if c is None or temperature is None:
             heat = None
         work = None
@@ -602,7 +637,7 @@ class CpuContactForces(ContactForces):
             work = KernelWork(nbrs.idx, nbrs.order, pair_rows, wall_rows, wv, rates)
         # fk includes gravity: the loop's body force, added there last
         return ForceResult(fk, tk, new_spring, new_wall_spring, contacts, mx[0], heat, work,
-                           None if ahead is None else moved[0])
+                           None if ahead is None else moved[0], drifted)
 
     def dissipation(self, work: KernelWork, vel, w) -> Dissipation:
         """The step's heat from the C++ loop's rows (its second pass,
@@ -615,6 +650,18 @@ class CpuContactForces(ContactForces):
             work.order)
         by_source = jnp.concatenate([work.rates, (sums[1] - jnp.sum(work.rates))[None]])
         return Dissipation(particle, sums[0], by_source)
+
+
+def _shell_of(walls, friction_heat) -> Optional[tuple[float, float]]:
+    """:attr:`CpuContactForces.shell` of these walls: ``(R, omega)`` of a first wall that is a
+    :class:`~drumheat.geometry.walls.DrumShell` of fixed radius and speed (numbers, not traced
+    values), without friction heat; else None."""
+    if not walls or type(walls[0]) is not DrumShell or friction_heat is not None:
+        return None
+    w = walls[0]
+    if not all(isinstance(v, (int, float, np.floating)) for v in (w.radius, w.rpm)):
+        return None
+    return float(w.radius), rpm_to_omega(float(w.rpm))
 
 
 def make_contact_forces(backend: str, particles, walls, params: ContactParams, *,

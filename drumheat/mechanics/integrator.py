@@ -57,7 +57,7 @@ import numpy as np
 
 from drumheat.geometry.walls import expand_walls, wall_bounds
 from drumheat.mechanics.contact_forces import ContactParams, critical_time_step
-from drumheat.mechanics.cpu_kernel import shared_value, skin_test_constants
+from drumheat.mechanics.cpu_kernel import drift_constants, shared_value, skin_test_constants
 from drumheat.mechanics.conduction import PairConduction
 from drumheat.mechanics.dissipation import FrictionHeat, boundary_energy
 from drumheat.mechanics.errors import (
@@ -634,6 +634,18 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     if (forces.looks_ahead and external_force is None and boundary_update is None
             and batch_axis is None and not always_rebuild):
         ahead = skin_test_constants(dt, inv_m, periodic_length, neighbor.lo, dtype)
+    # With it, the step's kicks and drift in the call too where it can make them
+    # (ContactForces.drifts: one mass and moment of inertia, no walls but a drum shell, whose
+    # geometry the loop computes at the drifted positions): run_segments' steps that keep the
+    # list hand the call the step before's state instead of XLA's three passes over the
+    # particles before it (the same numbers).
+    drifts = ahead is not None and forces.drifts
+
+    def drift_args(state: DEMState, aux):
+        """``drift`` of the contact call: the constants with the pending half-kick's factor
+        ``aux``, the step before's forces and torques."""
+        return (drift_constants(aux, dt, inv_m, inv_i, periodic_length, dtype), state.force,
+                state.torque)
 
     def step(state: DEMState, pairs: str = "check", drifted=None):
         # pairs: "check" (rebuild the neighbour list if some particle moved more than half the
@@ -641,10 +653,17 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         # drift(state) if the caller has it already
         return step_ahead(state, pairs, drifted)[:2]
 
-    def step_ahead(state: DEMState, pairs: str = "check", drifted=None, look: bool = False):
+    def step_ahead(state: DEMState, pairs: str = "check", drifted=None, look: bool = False,
+                   aux=None):
         # step(), and with `look` (run_segments' `in_call`) the coming step's largest squared
-        # displacement from the list's reference positions (else None)
-        v, w, x = drift(state) if drifted is None else drifted
+        # displacement from the list's reference positions (else None), and the step's
+        # half-step velocities and spins; `aux` (with `drifts`, a step that keeps the list):
+        # the kicks and drift in the contact call, the state's last half-kick `aux` times
+        # pending (run_segments), instead of `drifted`
+        if aux is not None:
+            v, w, x = state.velocity, state.angular_velocity, state.position  # the call's
+        else:
+            v, w, x = drift(state) if drifted is None else drifted
         t = state.time + jnp.asarray(dt, time_dtype)
         extra = state.extra
         args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
@@ -662,7 +681,11 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             extra = extra.with_pair_arrays(pdata)
         res = forces(x, v, w, t, nbrs, spring, state.wall_spring,
                      temperature=extra if conduction is not None else None,
-                     ahead=ahead if look else None)
+                     ahead=ahead if look else None,
+                     drift=None if aux is None else drift_args(state, aux))
+        if aux is not None:
+            x, v, w = res.drifted
+        vh, wh = v, w  # the half-step velocities and spins
         f, tq, spring, wspring, contacts, ovl, heat, work = res[:8]
         if external_force is not None:
             f = f + external_force(x, v, t, extra).astype(dtype)
@@ -679,7 +702,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             new = new._replace(extra=extra_update(new.extra, new, contacts, dt))
         if boundary_update is not None:
             new = boundary_update(new)
-        return new, contacts, res.ahead
+        return new, contacts, res.ahead, (vh, wh)
 
     def energies(state):
         m = mass
@@ -733,7 +756,11 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         # made XLA copy them every step (from the carry's drift into the state).
         # With the skin test in the contact call (`ahead`), the carry's `moved` holds the
         # coming step's largest squared displacement from each step's call (the loop's first
-        # test, before any call, from XLA); the loop's condition then only compares it.
+        # test, before any call, from XLA); the loop's condition then only compares it. Where
+        # the call also makes the kicks and drift (`drifts`), a step that keeps the list hands
+        # it the carried state and its `aux`, and neither the condition nor the step computes
+        # them in XLA; the step that rebuilds drifts in XLA, since the rebuild needs the new
+        # positions before the call.
         pending = boundary_update is None
         in_call = pending and ahead is not None and state.position.dtype == dtype
 
@@ -748,8 +775,11 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
 
         def advance(c, pairs):
             st, k, aux, moved = c
-            v, w, x = drift(st, kicked(st, aux))
-            new, _, ahead_moved = step_ahead(st, pairs, (v, w, x), look=in_call)
+            if in_call and drifts and pairs == "keep":  # the kicks and drift in the call
+                new, _, ahead_moved, (v, w) = step_ahead(st, pairs, look=True, aux=aux)
+            else:
+                v, w, x = drift(st, kicked(st, aux))
+                new, _, ahead_moved, _ = step_ahead(st, pairs, (v, w, x), look=in_call)
             if not pending:
                 return new, k + 1, kick(new), moved
             new = new._replace(velocity=v, angular_velocity=w)
