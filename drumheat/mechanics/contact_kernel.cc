@@ -1136,13 +1136,6 @@ struct Drift {
   }
 };
 
-// The particles' data packed into records, in the cell order `od` (null: their own numbering),
-// in one buffer from the pool: the positions and radii XR values per particle, (x_0 .. x_{D-1},
-// r, 0 ...), read by the scan for both partners of every listed pair, and the velocities, spins,
-// masses and moments of inertia VW values per particle, read by the tiles for the pairs within
-// reach and by the walls: each partner's come from one cache line instead of from one per
-// array, and the one copy lays them out in the cell order too. lp.XRp and lp.VWp are set to
-// them; the caller gives the buffer back when the loop is done.
 // the records of the particles whose data lie at [p0, p1) (pack_particles), after the step's
 // kicks and drift (dr), and with the drum shell their distance from the z axis
 template <typename S, int D>
@@ -1170,6 +1163,14 @@ DRUMHEAT_FMA_CLONES void pack_range(const Loop<S, D>& lp, const Drift<S, D>& dr,
   }
 }
 
+// The particles' data packed into records, in the cell order `od` (null: their own numbering),
+// in one buffer from the pool: the positions and radii XR values per particle, (x_0 .. x_{D-1},
+// r, 0 ...), read by the scan for both partners of every listed pair, and the velocities, spins,
+// masses and moments of inertia VW values per particle, read by the tiles for the pairs within
+// reach and by the walls: each partner's come from one cache line instead of from one per
+// array, and the one copy lays them out in the cell order too. lp.XRp and lp.VWp are set to
+// them (and lp.RHO, with the drum shell, to the particles' distances from its axis); the
+// caller gives the buffer back when the loop is done.
 template <typename S, int D>
 std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp,
                                        const int32_t* od) {

@@ -704,24 +704,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             new = boundary_update(new)
         return new, contacts, res.ahead, (vh, wh)
 
-    def energies(state):
-        m = mass
-        ek = 0.5 * jnp.sum(m[:, None] * state.velocity**2)
-        w2 = state.angular_velocity**2
-        if w2.ndim == 2:
-            w2 = jnp.sum(w2, axis=-1)
-        er = 0.5 * jnp.sum(inertia * w2)
-        ep = -jnp.sum(m * (state.position @ forces.g_vec))
-        c = forces.at(state).contacts
-        el = forces.elastic_energy(c, state.pair_spring, state.wall_spring)
-        out = dict(kinetic=ek, rotational=er, potential=ep, elastic=el,
-                   total=ek + er + ep + el)
-        if forces.friction_heat is not None:
-            tq = state.torque if rotation else jnp.zeros_like(state.torque)
-            out["boundary"] = boundary_energy(state.force, tq, state.velocity,
-                                              state.angular_velocity, mass, inertia,
-                                              forces.g_vec, dt)
-        return out
+    energies = _energy_book(forces, rotation, dt)
 
     def run_steps(state, n_steps):
         # a loop with a traced trip count: one compilation serves every chunk length
@@ -804,6 +787,33 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         return st._replace(velocity=v, angular_velocity=w)
 
     return step, run_steps, energies
+
+
+def _energy_book(forces: ContactForces, rotation: bool, dt):
+    """``energies(state)`` of :func:`make_dem`: kinetic, rotational, potential and elastic
+    energy, J, their total, and with friction heat the work of the boundaries."""
+    mass, inertia = forces.mass, forces.inertia
+
+    def energies(state):
+        m = mass
+        ek = 0.5 * jnp.sum(m[:, None] * state.velocity**2)
+        w2 = state.angular_velocity**2
+        if w2.ndim == 2:
+            w2 = jnp.sum(w2, axis=-1)
+        er = 0.5 * jnp.sum(inertia * w2)
+        ep = -jnp.sum(m * (state.position @ forces.g_vec))
+        c = forces.at(state).contacts
+        el = forces.elastic_energy(c, state.pair_spring, state.wall_spring)
+        out = dict(kinetic=ek, rotational=er, potential=ep, elastic=el,
+                   total=ek + er + ep + el)
+        if forces.friction_heat is not None:
+            tq = state.torque if rotation else jnp.zeros_like(state.torque)
+            out["boundary"] = boundary_energy(state.force, tq, state.velocity,
+                                              state.angular_velocity, mass, inertia,
+                                              forces.g_vec, dt)
+        return out
+
+    return energies
 
 
 def _checked_time_step(mass, params, dt, safety_factor, rotation):
