@@ -613,6 +613,45 @@ def test_the_loop_with_the_steps_work_in_the_call(monkeypatch, dim, dtype, switc
 
 
 @needs_kernel
+def test_the_loop_with_the_kicks_and_drift_without_walls(monkeypatch):
+    """Without walls (a periodic box, no gravity: the loop's geometry has nothing to evaluate)
+    the call makes the kicks and drift too, and the loop gives the run of the loop that makes
+    them in XLA bit for bit, through many rebuilds (a thin skin)."""
+    from drumheat.mechanics import forces as forces_mod
+
+    rng = np.random.default_rng(0)
+    a = 2.1 * R_P
+    g = (np.arange(6) + 0.5) * a
+    pts = np.stack([x.ravel() for x in np.meshgrid(g, g, g, indexing="ij")], 1)
+    pts += rng.uniform(-0.05, 0.05, pts.shape) * a
+    part = make_particles(np.full(len(pts), R_P), np.full(len(pts), 2500.0))
+    params = contact_params(1e5, kt=0.9e5, damping_ratio=0.3, tangential_damping_ratio=0.25,
+                            friction=0.5, rolling_friction=0.05)
+    vel = jnp.asarray(rng.normal(0.0, 0.3, pts.shape))
+
+    def run(drifts):
+        init = forces_mod.CpuContactForces.__init__
+
+        def patched(self, *args, **kw):
+            init(self, *args, **kw)
+            self.drifts = self.drifts and drifts
+
+        monkeypatch.setattr(forces_mod.CpuContactForces, "__init__", patched)
+        dem = make_dem(part, [], params, dim=3, dt=1e-5, skin=0.25 * R_P, pair_kernel="cpu",
+                       bounds=(np.zeros(3), np.full(3, 6 * a)), periodic_length=6 * a,
+                       gravity=np.zeros(3))
+        assert dem._forces.__wrapped__.func.drifts == drifts
+        st = dem.init(jnp.asarray(pts))._replace(velocity=vel)
+        return st, dem.run_steps(st, 400)
+
+    st, a_ = run(True)
+    b_ = run(False)[1]
+    assert int(a_.n_rebuilds) - int(st.n_rebuilds) >= 10
+    for x, y in zip(jax.tree_util.tree_leaves(a_), jax.tree_util.tree_leaves(b_)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@needs_kernel
 def test_any_order_of_the_pair_slots(monkeypatch):
     """The loop takes the pairs in any order: a list not sorted by the first particle, its
     padding slots spread among the pairs (the scan finds them one by one instead of at the
