@@ -101,7 +101,11 @@
 // jnp.round, with dz / L taken as dz (1 / L) as XLA computes it): the arithmetic of the
 // loop's condition in XLA (the same velocities, positions and displacements; the sum of the
 // squares may differ by an ulp where XLA's code fuses it into multiply-adds), in the pass
-// that adds the chunks' forces, where F is at hand.
+// that adds the chunks' forces, where F is at hand. Its kicks and drift are not fused into
+// multiply-adds, where the step's own with input 23 are (as XLA's code in the loop fuses them):
+// where the coming step drifts in the call, its largest displacement may differ from this
+// test's by an ulp, which changes a rebuild only where one lies within an ulp of half the skin
+// (the skin test is a bound with a margin of the skin, not a part of the trajectory).
 //
 // Contact conduction (optional, law >= 0; drumheat/mechanics/conduction.py): the heat flow into
 // each particle Q_i = sum_j g_ij (T_j - T_i) over the conducting pairs, g = h pi min(r_i, r_j)^2

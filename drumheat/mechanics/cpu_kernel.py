@@ -456,9 +456,15 @@ def skin_test_constants(dt, inv_mass, periodic_length, lo, dtype):
     ``lo`` (the neighbour list's frame), in ``dtype``."""
     one = lambda v: np.asarray(v, dtype)  # noqa: E731  a constant as XLA holds it
     L = one(periodic_length or 0.0)
-    vals = [one(0.5 * dt) * one(inv_mass), one(dt), L, one(1.0) / L if L else one(0.0),
+    vals = [_half_kick(dt, inv_mass, dtype), one(dt), L, one(1.0) / L if L else one(0.0),
             *np.asarray(lo, dtype)]
     return jnp.asarray(np.array(vals, dtype))
+
+
+def _half_kick(dt, inverse, dtype):
+    """``(dt / 2) (1 / m)`` (or ``1 / I``) in ``dtype``: the one constant XLA folds the
+    integrator's half-kick ``dt/2 F (1/m)`` into, as the loop takes it."""
+    return np.asarray(0.5 * dt, dtype) * np.asarray(inverse, dtype)
 
 
 def drift_constants(aux, dt, inv_mass, inv_inertia, periodic_length, dtype):
@@ -466,9 +472,8 @@ def drift_constants(aux, dt, inv_mass, inv_inertia, periodic_length, dtype):
     the pending half-kick's factor ``aux`` (0 or 1, traced), ``c = (dt / 2) (1 / m)`` and
     ``c_I = (dt / 2) (1 / I)`` (the products XLA folds the integrator's ``dt/2 F (1/m)`` and
     ``dt/2 M (1/I)`` into), dt and the period L of the last axis (0: none), in ``dtype``."""
-    one = lambda v: np.asarray(v, dtype)  # noqa: E731  a constant as XLA holds it
-    rest = np.array([one(0.5 * dt) * one(inv_mass), one(0.5 * dt) * one(inv_inertia), one(dt),
-                     one(periodic_length or 0.0)], dtype)
+    rest = np.array([_half_kick(dt, inv_mass, dtype), _half_kick(dt, inv_inertia, dtype),
+                     np.asarray(dt, dtype), np.asarray(periodic_length or 0.0, dtype)], dtype)
     return jnp.concatenate([jnp.asarray(aux, dtype).reshape(1), jnp.asarray(rest)])
 
 

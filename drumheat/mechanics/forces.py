@@ -593,14 +593,14 @@ class CpuContactForces(ContactForces):
             self.ptype if self.params.n_types > 1 else jnp.zeros((1,), jnp.int32))
         # gravity as the loop adds it to each particle's force last, one row where all
         # particles share the mass
-        m = cpu_kernel.uniform_or_all(self.mass)
+        _, m, inertia, _ = self._kernel_particles
         self._body_force = self.gravity(m)
         # the coming step's skin test in the loop: its kick c F takes one mass for all
         self.looks_ahead = m.shape == (1,)
         self.shell = _shell_of(self.walls, self.friction_heat)
         # the step's kicks and drift in the loop: one mass and moment of inertia (its kicks'
         # c F, c_I M), and the walls' geometry the loop's own (none, or the shell alone)
-        self.drifts = (self.looks_ahead and cpu_kernel.uniform_or_all(self.inertia).shape == (1,)
+        self.drifts = (self.looks_ahead and inertia.shape == (1,)
                        and (self.n_w == 0 or (self.shell is not None and self.n_w == 1))
                        and self.friction_heat is None)
 
