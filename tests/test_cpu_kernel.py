@@ -865,3 +865,51 @@ def test_two_processes_build_the_kernel_once(tmp_path):
     assert len(list((tmp_path / "kernels").glob("*.so"))) == 1
     logs = list((tmp_path / "kernels").glob("*.log"))
     assert len(logs) <= 1  # one compilation at most left its log
+
+
+@needs_kernel
+@pytest.mark.parametrize("substeps", [1, 7])
+def test_runs_of_steps_in_the_call_give_the_coupled_run(monkeypatch, substeps):
+    """With the coupled heat, whose hook only counts the conducting contacts between thermal
+    steps (``CountingUpdate``), the loop between rebuilds makes its steps in runs inside one
+    C++ call, up to the next thermal step, rebuild or the chunk's end; the run is that of the
+    loop that returns to XLA after each step, bit for bit: positions, velocities, springs,
+    temperatures, heat accounts, contact-time accumulators and counts, the recording's too,
+    through neighbour rebuilds and thermal steps."""
+    import drumheat.mechanics.integrator as integrator
+    from drumheat.motion import make_motion
+    from drumheat.motion.coupling import ThermalUpdate
+    from drumheat.scene import load_scene, scene_from_dict
+    from drumheat.scene.rules import dem_critical_time_step
+
+    raw = load_scene("weigler-static").to_dict()
+    raw["groups"][0]["count"] = raw["groups"][1]["count"] = 15
+    raw["run"].update(duration=0.2, output_interval=0.05, solver="explicit")
+    raw["drum"]["rpm"] = 12.0
+    raw["motion"] = {"model": "dem"}
+    raw["dem"] = {"stiffness": 2.0e4, "thermal_substeps": substeps, "contact_backend": "cpu"}
+    raw["dem"]["dt"] = 0.2 * dem_critical_time_step(scene_from_dict(raw))
+    raw["dem"]["record_interval"] = 0.01
+
+    traced = []  # the runs of steps the loop traced (ThermalUpdate.counted)
+    counted = ThermalUpdate.counted
+    monkeypatch.setattr(ThermalUpdate, "counted",
+                        lambda self, *a: traced.append(1) or counted(self, *a))
+
+    def run(runs):
+        if not runs:  # the hook no longer a CountingUpdate: one return to XLA per step
+            monkeypatch.setattr(integrator, "CountingUpdate", type("Plain", (), {}))
+        bed = make_motion(scene_from_dict(raw))
+        assert bed.dem._forces.__wrapped__.func.drifts
+        start = bed.initial_state()
+        return start, bed.dem.run(start, 1500)
+
+    start, a = run(True)
+    assert traced
+    traced.clear()
+    b = run(False)[1]
+    assert not traced
+    assert int(a.n_rebuilds) - int(start.n_rebuilds) >= 2
+    assert float(jnp.max(a.extra.T - start.extra.T)) > 0  # heat went in
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))

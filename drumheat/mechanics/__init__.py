@@ -28,6 +28,7 @@ from drumheat.mechanics.errors import (  # noqa: F401
 from drumheat.mechanics.forces import Contacts, ContactForces, make_contact_forces  # noqa: F401
 from drumheat.mechanics.integrator import (  # noqa: F401
     DEM,
+    CountingUpdate,
     DEMAccuracyWarning,
     DEMState,
     Particles,

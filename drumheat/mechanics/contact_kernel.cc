@@ -732,6 +732,11 @@ struct Call {
   // torques of the step before (df, dtq, inputs 24-25); DX, DV, DWo: x', v', w' (outputs 17-19)
   const void *drift = nullptr, *df = nullptr, *dtq = nullptr;
   void *DX = nullptr, *DV = nullptr, *DWo = nullptr;
+  // steps: null, or the run of steps (input 26: K and half the skin squared), with PC, WC
+  // each pair slot's and wall slot's count of the steps it conducts (outputs 20-21) and DONE
+  // the steps made (output 22)
+  const void* steps = nullptr;
+  int32_t *PC = nullptr, *WC = nullptr, *DONE = nullptr;
   void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX, *PW, *WW;
   double *Q, *R;
   bool* CD;
@@ -766,6 +771,7 @@ struct Loop {
   const S* RHO = nullptr;
   S *Sn, *WSo, *OV, *DI, *FN, *WO, *WF, *PW, *WW;  // OV, DI, FN null: not wanted
   bool *CD, *CW;
+  int32_t *PC, *WC;  // null, or the slots' counts of the steps they conduct (a run of steps)
   const double* TK;
   bool heat_on, gap_on, rot, fh, one_type, roll_pp = false, roll_pw = false;
   S dt, L, tol, cgap, wgap;
@@ -788,7 +794,7 @@ struct Loop {
     OV = static_cast<S*>(a.OV); DI = static_cast<S*>(a.DI); FN = static_cast<S*>(a.FN);
     WO = static_cast<S*>(a.WO); WF = static_cast<S*>(a.WF);
     PW = static_cast<S*>(a.PW); WW = static_cast<S*>(a.WW);
-    CD = a.CD; CW = a.CW;
+    CD = a.CD; CW = a.CW; PC = a.PC; WC = a.WC;
     SH = static_cast<const S*>(a.shell);
     ng = SH ? nw - 1 : nw;
     TK = a.temp;
@@ -866,6 +872,7 @@ struct Loop {
       // and which pairs conduct, for every slot
       if (OV) for (int64_t k = b0; k < b1; ++k) { OV[k] = S(0); DI[k] = S(0); FN[k] = S(0); }
       for (int64_t k = b0; k < b1; ++k) CD[k] = bl->cd[k - b0];
+      if (PC) for (int64_t k = b0; k < b1; ++k) PC[k] += bl->cd[k - b0];
       if (fh) for (int64_t k = KP*b0; k < KP*b1; ++k) PW[k] = S(0);
       if (fh)  // the opened contacts' rows, from the old springs before they are cleared
         for (int64_t k = b0; k < b1; ++k)
@@ -1007,6 +1014,7 @@ struct Loop {
     const S rho = sh ? RHO[p] : S(0);
     const S ov = rp - (sh ? SH[0] - rho : WD[g]);
     if (CW) CW[q] = wgap > S(0) ? ov >= -(wgap*(S(2)*rp)) : ov > S(0);
+    if (WC) WC[q] += CW[q];
     const Law<S>& law = pw[(one_type ? 0 : pt[pu])*nw + wl];
     const S xi2 = fh ? dot<S, D>(so, so) : S(0);
     const S ov0 = fh ? rp - WD0[q] : S(0);  // the walls before the step, from JAX
@@ -1353,6 +1361,40 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   return true;
 }
 
+// A run of steps (input 26, see the header): the call's step, then while fewer than K steps
+// are made and the coming step's skin test passes, the next one, each from the outputs of the
+// one before (its positions, half-step velocities and spins, forces, torques and springs; the
+// pending half-kick's factor 1), with the slots' counts of the steps they conduct and the
+// largest overlap ratio of all steps
+template <typename S, int D>
+bool run_steps(ffi::ThreadPool& pool, const Call& a) {
+  if (!a.steps) return run<S, D>(pool, a);
+  const S* st = static_cast<const S*>(a.steps);
+  const int64_t most = static_cast<int64_t>(st[0]);
+  const S half_skin2 = st[1];
+  std::memset(a.PC, 0, sizeof(int32_t) * a.m);
+  if (a.WC) std::memset(a.WC, 0, sizeof(int32_t) * a.n * a.nw);
+  Call b = a;
+  S kick[5];
+  std::memcpy(kick, a.drift, sizeof(kick));
+  kick[0] = S(1);  // every step after the first: its predecessor's last half-kick pending
+  S* MX = static_cast<S*>(a.MX);
+  S mx = S(0);
+  int32_t done = 0;
+  while (true) {
+    if (!run<S, D>(pool, b)) return false;
+    ++done;
+    const S m = MX[0];
+    if (m > mx || m != m) mx = m;  // (a NaN carried, as jnp.maximum)
+    if (done >= most || static_cast<const S*>(a.AH)[0] > half_skin2) break;
+    b.x = b.DX; b.v = b.DV; b.w = b.DWo; b.df = b.F; b.dtq = b.T; b.sp = b.S; b.ws = b.WS;
+    b.drift = kick;
+  }
+  MX[0] = mx;
+  a.DONE[0] = done;
+  return true;
+}
+
 // the buffers of one call of the friction heat's second pass (ContactHeatImpl)
 struct HeatCall {
   const void *v, *w, *PW, *WW, *wv, *wom;
@@ -1441,7 +1483,7 @@ static ffi::Error ContactsImpl(
     ffi::AnyBuffer wall_omega, ffi::Buffer<ffi::F64> temp, ffi::AnyBuffer wdist0,
     ffi::Buffer<ffi::S32> order, ffi::AnyBuffer body, ffi::AnyBuffer ahead, ffi::AnyBuffer ref,
     ffi::AnyBuffer shell, ffi::AnyBuffer drift, ffi::AnyBuffer dforce, ffi::AnyBuffer dtorque,
-    double dt,
+    ffi::AnyBuffer run_of_steps, double dt,
     double L, int32_t law, double h, double tol, int32_t rot, int32_t fh, double cgap,
     double wgap,
     ffi::Result<ffi::AnyBuffer> force, ffi::Result<ffi::AnyBuffer> torque,
@@ -1454,13 +1496,15 @@ static ffi::Error ContactsImpl(
     ffi::Result<ffi::AnyBuffer> wall_rows, ffi::ResultBuffer<ffi::F64> rates,
     ffi::Result<ffi::AnyBuffer> ahead_out, ffi::ResultBuffer<ffi::PRED> wall_conducts,
     ffi::Result<ffi::AnyBuffer> dpos, ffi::Result<ffi::AnyBuffer> dvel,
-    ffi::Result<ffi::AnyBuffer> domg) {
+    ffi::Result<ffi::AnyBuffer> domg, ffi::ResultBuffer<ffi::S32> pair_counts,
+    ffi::ResultBuffer<ffi::S32> wall_counts, ffi::ResultBuffer<ffi::S32> done) {
   const ffi::DataType et = pos.element_type();
   if (et != ffi::DataType::F32 && et != ffi::DataType::F64)
     return ffi::Error::InvalidArgument("drumheat_contacts: positions must be f32 or f64");
   for (const ffi::AnyBuffer* b : {&vel, &omg, &rad, &mass, &inertia, &spring, &wdist, &wnrm,
                                   &wvel, &wspring, &tab_pp, &tab_pw, &wall_omega, &wdist0,
-                                  &body, &ahead, &ref, &shell, &drift, &dforce, &dtorque})
+                                  &body, &ahead, &ref, &shell, &drift, &dforce, &dtorque,
+                                  &run_of_steps})
     if (b->element_type() != et)
       return ffi::Error::InvalidArgument("drumheat_contacts: mixed float dtypes");
   for (ffi::Result<ffi::AnyBuffer>* b : {&force, &torque, &nspring, &ovl_out, &dist_out,
@@ -1572,10 +1616,22 @@ static ffi::Error ContactsImpl(
     a.ahead = ahead.untyped_data(); a.ref = ref.untyped_data();
     a.AH = ahead_out->untyped_data();
   }
+  if (run_of_steps.element_count() != 0) {
+    if (run_of_steps.element_count() != 2 || !a.drift || !a.ahead || (a.nw && !a.CW) ||
+        static_cast<int64_t>(pair_counts->element_count()) != a.m ||
+        static_cast<int64_t>(wall_counts->element_count()) != a.n * a.nw ||
+        done->element_count() != 1)
+      return ffi::Error::InvalidArgument("drumheat_contacts: a run of steps takes K and half "
+                                         "the skin squared, the drift, the skin test, the wall "
+                                         "slots' flags and three outputs");
+    a.steps = run_of_steps.untyped_data();
+    a.PC = pair_counts->typed_data(); a.WC = a.nw ? wall_counts->typed_data() : nullptr;
+    a.DONE = done->typed_data();
+  }
   const bool f64 = et == ffi::DataType::F64;
   bool ok;
-  if (dim == 3) ok = f64 ? run<double, 3>(pool, a) : run<float, 3>(pool, a);
-  else ok = f64 ? run<double, 2>(pool, a) : run<float, 2>(pool, a);
+  if (dim == 3) ok = f64 ? run_steps<double, 3>(pool, a) : run_steps<float, 3>(pool, a);
+  else ok = f64 ? run_steps<double, 2>(pool, a) : run_steps<float, 2>(pool, a);
   if (!ok)
     return ffi::Error::InvalidArgument("drumheat_contacts: the cell order is not a permutation "
                                        "of the particles");
@@ -1595,6 +1651,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>().Arg<ffi::AnyBuffer>()
+        .Arg<ffi::AnyBuffer>()
         .Attr<double>("dt").Attr<double>("L").Attr<int32_t>("law").Attr<double>("h")
         .Attr<double>("tol").Attr<int32_t>("rot").Attr<int32_t>("fh").Attr<double>("cgap")
         .Attr<double>("wgap")
@@ -1604,7 +1661,8 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>().Ret<ffi::Buffer<ffi::PRED>>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::F64>>()
         .Ret<ffi::AnyBuffer>().Ret<ffi::Buffer<ffi::PRED>>()
-        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>());
+        .Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>().Ret<ffi::AnyBuffer>()
+        .Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>().Ret<ffi::Buffer<ffi::S32>>());
 
 // The friction heat's second pass (ContactHeat; see the header).
 static ffi::Error ContactHeatImpl(

@@ -310,7 +310,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
              periodic_length=None, rotation=True, temperature=None, conduction_law=None,
              conduction_h=0.0, gap_tolerance=0.0, wall_distance_before=None,
              pair_gap=0.0, order=None, details=True, body_force=None, ahead=None, shell=None,
-             wall_gap=None, drift=None):
+             wall_gap=None, drift=None, steps=None):
     """Particle-particle and particle-wall contact forces in one C++ loop.
 
     The mechanics run in the dtype of ``pos`` (float32 or float64); every float input is cast
@@ -372,10 +372,19 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         roundings of the integrator's, and computes the contacts at the new positions and
         velocities, returned as ``drifted`` (contact_kernel.cc, the step's kicks and drift).
         Walls: none, or the drum shell alone (``shell``); not with ``wall_distance_before``.
+      steps: None, or ``(most, half_skin_sq)`` (traced; with ``drift``, ``ahead`` and
+        ``wall_gap``): a run of steps in the call. After the step, while fewer than ``most``
+        are made and the coming step's skin test is at most ``half_skin_sq``, the loop makes
+        the next step from the one before's outputs (its pending half-kick's factor 1): the
+        steps of the integrator's loop between neighbour rebuilds, without a return to XLA
+        between them (contact_kernel.cc, a run of steps). The outputs are then those of the
+        last step, ``max_overlap`` the largest of all steps', and ``counted`` holds each pair
+        slot's (M,) and wall slot's (N W,) count of the steps it conducted (int32) and the
+        steps made (1,) int32.
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
     wall_overlap, wall_normal_force, max_overlap, heat, conducts, pair_rows, wall_rows,
-    rates, ahead, wall_conducts, drifted)``: contact forces (N, D) and torques (N, 3) or (N,)
+    rates, ahead, wall_conducts, drifted, counted)``: contact forces (N, D) and torques (N, 3) or (N,)
     on the particles (torques zero without ``rotation``); per pair the new springs (M, D),
     overlap, centre distance and normal force (M, or length 0 without ``details``); per wall
     slot the new springs (N, W, D), overlap and normal force (N, W); all zero where nothing
@@ -392,7 +401,7 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
     its surface gap is at most ``wall_gap`` times the particle's diameter
     (:meth:`drumheat.mechanics.forces.ContactForces.wall_gap_mask`, the same test); with
     ``drift`` (else None) the positions, velocities and spins after the step's kicks and drift
-    ``(pos, vel, omega)``, updated in place.
+    ``(pos, vel, omega)``, updated in place; with ``steps`` (else None) ``counted`` as above.
     """
     target = load()
     dtype = jnp.dtype(pos.dtype)
@@ -423,6 +432,12 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
     outs += [sd((n, dim) if drift is not None else (0,), dtype),
              sd((n, dim) if drift is not None else (0,), dtype),
              sd(wshape if drift is not None else (0,), dtype)]
+    runs = steps is not None
+    if runs and (drift is None or ahead is None or (nw and wall_gap is None)):
+        raise ValueError("a run of steps in the call takes the drift, the skin test and the "
+                         "wall slots' conduction flags")
+    outs += [sd((m,) if runs else (0,), jnp.int32), sd((n * nw,) if runs else (0,), jnp.int32),
+             sd((1,) if runs else (0,), jnp.int32)]
     wd0 = wall_distance_before if fh else jnp.zeros((0,))
     body = jnp.zeros((0,)) if body_force is None else body_force
     consts, ref = (jnp.zeros((0,)), jnp.zeros((0,))) if ahead is None else ahead
@@ -442,11 +457,13 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
         c(tables_pw), c(wall_omega), temperature.astype(jnp.float64), c(wd0),
         _order_arg(order), c(body), c(consts), c(ref), c(shell), c(kick), c(f_before),
         c(t_before).reshape(wshape if drift is not None else (0,)),
+        jnp.zeros((0,), dtype) if steps is None else jnp.stack([c(v) for v in steps]),
         dt=np.float64(dt), L=np.float64(periodic_length or 0.0), law=np.int32(law),
         h=np.float64(conduction_h), tol=np.float64(gap_tolerance),
         rot=np.int32(bool(rotation)), fh=np.int32(fh), cgap=np.float64(pair_gap),
         wgap=np.float64(wall_gap or 0.0))
-    return (*out[:17], tuple(out[17:]) if drift is not None else None)
+    return (*out[:17], tuple(out[17:20]) if drift is not None else None,
+            tuple(out[20:]) if runs else None)
 
 
 def skin_test_constants(dt, inv_mass, periodic_length, lo, dtype):

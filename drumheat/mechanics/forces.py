@@ -109,7 +109,9 @@ class ForceResult(NamedTuple):
     step's largest squared displacement from the list's reference positions, m^2, where the
     call was asked for it (:attr:`ContactForces.looks_ahead`; else None); drifted: the
     positions, half-step velocities and spins ``(x, v, w)`` of the step's kicks and drift,
-    where the call made them (:attr:`ContactForces.drifts`; else None).
+    where the call made them (:attr:`ContactForces.drifts`; else None); counted: with a run of
+    steps in the call (``steps`` of :meth:`ContactForces.__call__`; else None) each pair slot's
+    (M,) and wall slot's (N W,) count of the steps it conducted and the steps made (1,), int32.
     """
 
     force: jax.Array
@@ -122,6 +124,7 @@ class ForceResult(NamedTuple):
     work: Optional[ContactWork | KernelWork] = None
     ahead: Optional[jax.Array] = None
     drifted: Optional[tuple] = None
+    counted: Optional[tuple] = None
 
 
 def _materialize(tree, pred):
@@ -227,7 +230,7 @@ class ContactForces:
 
     def __call__(self, pos, vel, w, t, nbrs, pair_spring, wall_spring,
                  temperature=None, details: bool | None = None, ahead=None,
-                 drift=None) -> ForceResult:
+                 drift=None, steps=None) -> ForceResult:
         """Forces and torques at ``pos`` with the velocities ``vel``, ``w`` (the half-step ones
         in the Verlet step: the dashpots and the spring increment use them, as LIGGGHTS does).
         ``temperature`` (N,) K: for the per-step pair conduction, if the system has one.
@@ -240,14 +243,20 @@ class ContactForces:
         ``drift``: where :attr:`drifts`, ``(constants, force, torque)`` of the step's kicks and
         drift (:func:`~drumheat.mechanics.cpu_kernel.drift_constants`, the forces and torques
         of the step before): ``pos``, ``vel``, ``w`` are then the step before's and the call
-        first kicks and drifts them (the result's ``drifted``)."""
+        first kicks and drifts them (the result's ``drifted``). ``steps``: where
+        :attr:`drifts`, with ``ahead`` and ``drift``, ``(most, half_skin_sq)``: a run of up to
+        ``most`` steps while the skin test passes, in one call (the result that of the last
+        step, with ``counted``; :func:`~drumheat.mechanics.cpu_kernel.contacts`)."""
         if ahead is not None and not self.looks_ahead:
             raise ValueError(f"{type(self).__name__} makes no skin test of the coming step")
         if drift is not None and not self.drifts:
             raise ValueError(f"{type(self).__name__} makes no kicks and drift")
+        if steps is not None and (drift is None or ahead is None):
+            raise ValueError("a run of steps in the call takes the kicks and drift and the "
+                             "skin test")
         details = self.pair_details if details is None else details
         res = self._contacts(pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature,
-                             details, ahead, drift)
+                             details, ahead, drift, steps)
         if details:
             return res
         return res._replace(contacts=res.contacts._replace(
@@ -273,7 +282,7 @@ class ContactForces:
                     state.nbrs, state.pair_spring, state.wall_spring, details=True)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
-                  ahead, drift) -> ForceResult:  # pragma: no cover - abstract
+                  ahead, drift, steps) -> ForceResult:  # pragma: no cover - abstract
         """The forces (gravity included, :meth:`gravity`) and contacts; ``details`` False: the
         caller drops the per-pair details (a kernel may skip computing them); ``ahead``,
         ``drift``: as :meth:`__call__` (None where the class does not :attr:`looks_ahead`,
@@ -393,7 +402,7 @@ class JaxContactForces(ContactForces):
     one scatter of forces and torques), walls as an (N, W) block."""
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
-                  ahead, drift) -> ForceResult:
+                  ahead, drift, steps) -> ForceResult:
         n, gap_pp, radius = self.n, self.gap_pp, self.radius
         i, j = nbrs.idx[0], nbrs.idx[1]
         force, torque = self.gravity(self.mass), jnp.zeros_like(w)  # the sums start from them
@@ -605,7 +614,7 @@ class CpuContactForces(ContactForces):
                        and self.friction_heat is None)
 
     def _contacts(self, pos, vel, w, t, nbrs, pair_spring, wall_spring, temperature, details,
-                  ahead, drift) -> ForceResult:
+                  ahead, drift, steps) -> ForceResult:
         i, j = nbrs.idx[0], nbrs.idx[1]
         # the shell's geometry in the loop where it reads the positions given (not the wider
         # ones of mixed precision, whose walls JAX evaluates before rounding)
@@ -620,12 +629,12 @@ class CpuContactForces(ContactForces):
             heat_args["wall_distance_before"] = self.wall_geometry(pos - self.dt_c * vel,
                                                                    t - self.dt)[0]
         (fk, tk, new_spring, ovl, dist, fn, new_wall_spring, w_ovl, w_fn, mx, heat, p_cond,
-         pair_rows, wall_rows, rates, moved, w_cond, drifted) = self._kernel.contacts(
+         pair_rows, wall_rows, rates, moved, w_cond, drifted, counted) = self._kernel.contacts(
             self.pair_positions(pos), vel, w, *self._kernel_particles, nbrs.idx, pair_spring,
             wd, wn, wv, wall_spring, **self._kernel_params, **heat_args,
             pair_gap=self.gap_pp, order=nbrs.order, details=details, body_force=self._body_force,
             ahead=None if ahead is None else (ahead, nbrs.reference_position), shell=shell,
-            wall_gap=self.gap_pw, drift=drift)
+            wall_gap=self.gap_pw, drift=drift, steps=steps)
         # p_cond, w_cond: the pairs and wall slots within the conduction gap, pair_gap_mask's
         # and wall_gap_mask's tests in the C++ loop
         contacts = self.record(i, j, ovl > 0, ovl, dist, fn, p_cond,
@@ -637,7 +646,7 @@ class CpuContactForces(ContactForces):
             work = KernelWork(nbrs.idx, nbrs.order, pair_rows, wall_rows, wv, rates)
         # fk includes gravity: the loop's body force, added there last
         return ForceResult(fk, tk, new_spring, new_wall_spring, contacts, mx[0], heat, work,
-                           None if ahead is None else moved[0], drifted)
+                           None if ahead is None else moved[0], drifted, counted)
 
     def dissipation(self, work: KernelWork, vel, w) -> Dissipation:
         """The step's heat from the C++ loop's rows (its second pass,

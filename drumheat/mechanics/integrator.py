@@ -79,6 +79,7 @@ __all__ = [
     "make_particles",
     "DEMState",
     "PairCarried",
+    "CountingUpdate",
     "Contacts",
     "DEM",
     "make_dem",
@@ -207,6 +208,35 @@ class PairCarried(eqx.Module):
         leaf goes through ``remap``; a state may also book what the dropped pairs held (its
         ``arrays`` may then hold other leaves too)."""
         return jax.tree_util.tree_map(remap, arrays)
+
+
+class CountingUpdate(abc.ABC):
+    """An ``extra_update`` hook (:func:`make_dem`) that, on most steps, reads of the step's
+    contacts only which ones conduct, and counts them: the steps between its own events (the
+    coupled heat's thermal steps) then need not return to it one by one.
+
+    Where the C++ contact loop makes the steps' kicks and drift
+    (:attr:`~drumheat.mechanics.forces.ContactForces.drifts`), the loop between neighbour
+    rebuilds makes runs of up to :meth:`free_steps` steps in one contact call (its skin test
+    between them) and hands the hook their counts (:meth:`counted`) instead of calling it after
+    each step. The coupled heat (:func:`drumheat.motion.coupling.make_thermal_update`) is one.
+    """
+
+    @abc.abstractmethod
+    def __call__(self, extra, state, contacts, dt):
+        """``extra`` after the step that led to ``state`` with ``contacts`` (as any hook)."""
+
+    @abc.abstractmethod
+    def free_steps(self, extra):
+        """How many steps from ``extra`` on the hook takes as counts (a traced int32 >= 1):
+        :meth:`counted` of that many steps or fewer equals as many calls."""
+
+    @abc.abstractmethod
+    def counted(self, extra, state, pair_counts, wall_counts, steps, dt):
+        """``extra`` after ``steps`` steps (at most :meth:`free_steps`), in which each pair
+        slot (M,) and particle-wall slot (N W,) conducted ``pair_counts`` and ``wall_counts``
+        times (int32; the slots of :class:`Contacts`, the list unchanged over the steps);
+        ``state``: the state after them, with half-step velocities and spins."""
 
 
 def pair_extra(extra):
@@ -640,6 +670,11 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     # list hand the call the step before's state instead of XLA's three passes over the
     # particles before it (the same numbers).
     drifts = ahead is not None and forces.drifts
+    # With the drift in the call and a hook that only counts the conducting contacts between
+    # its events (CountingUpdate), run_segments' steps that keep the list run in the call, up
+    # to the hook's next event, one call for all (the same numbers: `run_in_call`).
+    runs = drifts and isinstance(extra_update, CountingUpdate) and conduction is None
+    dt_time = jnp.asarray(dt, time_dtype)
 
     def drift_args(state: DEMState, aux):
         """``drift`` of the contact call: the constants with the pending half-kick's factor
@@ -664,7 +699,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             v, w, x = state.velocity, state.angular_velocity, state.position  # the call's
         else:
             v, w, x = drift(state) if drifted is None else drifted
-        t = state.time + jnp.asarray(dt, time_dtype)
+        t = state.time + dt_time
         extra = state.extra
         args = (x, state.nbrs, state.pair_spring, state.n_rebuilds, pair_extra(extra))
         if always_rebuild or pairs == "rebuild":
@@ -703,6 +738,29 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         if boundary_update is not None:
             new = boundary_update(new)
         return new, contacts, res.ahead, (vh, wh)
+
+    def run_in_call(state: DEMState, aux, left):
+        # run_segments' steps that keep the list, as step_ahead with `aux` makes them one by
+        # one, up to `left` steps and the hook's next event, in one contact call (`runs`): it
+        # makes each step's kicks, drift and forces, its skin test of the coming step, and
+        # stops after a step whose test fails. Returns the state after them (half-step
+        # velocities and spins, as run_segments carries them), the steps made and the coming
+        # step's largest squared displacement. The time advances by dt per step, as each
+        # step adds it; the largest overlap ratio is the steps' largest, the hook's
+        # accumulators take the steps' counts (CountingUpdate.counted), the same integers.
+        most = jnp.minimum(jnp.minimum(left, extra_update.free_steps(state.extra)), 1 << 20)
+        res = forces(state.position, state.velocity, state.angular_velocity,
+                     state.time + dt_time, state.nbrs, state.pair_spring, state.wall_spring,
+                     ahead=ahead, drift=drift_args(state, aux), steps=(most, half_skin_sq))
+        (x, v, w), (pair_counts, wall_counts, done) = res.drifted, res.counted
+        done = done[0]
+        t = jax.lax.fori_loop(0, done, lambda _, t: t + dt_time, state.time)
+        new = state._replace(position=x, velocity=v, angular_velocity=w, force=res.force,
+                             torque=res.torque, time=t, step=state.step + done,
+                             pair_spring=res.pair_spring, wall_spring=res.wall_spring,
+                             max_overlap=jnp.maximum(state.max_overlap, res.max_overlap))
+        extra = extra_update.counted(state.extra, new, pair_counts, wall_counts, done, dt)
+        return new._replace(extra=extra), done, res.ahead
 
     energies = _energy_book(forces, rotation, dt)
 
@@ -758,6 +816,9 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
 
         def advance(c, pairs):
             st, k, aux, moved = c
+            if in_call and runs and pairs == "keep":  # a run of steps in the call
+                new, done, ahead_moved = run_in_call(st, aux, n_steps - k)
+                return new, k + done.astype(k.dtype), jnp.ones_like(aux), ahead_moved
             if in_call and drifts and pairs == "keep":  # the kicks and drift in the call
                 new, _, ahead_moved, (v, w) = step_ahead(st, pairs, look=True, aux=aux)
             else:

@@ -28,12 +28,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from drumheat.mechanics.dissipation import SOURCES
-from drumheat.mechanics.integrator import PairCarried
+from drumheat.mechanics.integrator import CountingUpdate, PairCarried
 from drumheat.thermal.model import ThermalModel
 from drumheat.thermal.network import ContactNetwork
 
 __all__ = ["CoupledHeat", "PairTimes", "ContactCount", "FrictionBook", "thermal_network",
-           "make_thermal_update", "initial_extra", "reset_record", "reset_count",
+           "make_thermal_update", "ThermalUpdate", "initial_extra", "reset_record", "reset_count",
            "recorded_times", "contact_count",
            "drum_wall_step"]
 
@@ -248,23 +248,13 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
         # made XLA copy both every step in the other branch of the lax.cond)
         return fold(extra).replace(T=T, Q=Q, k=jnp.zeros_like(extra.k), **out)
 
-    def update(extra, state, contacts, dt_):
-        # the contacts that conduct: overlapping or within the conduction gap tolerance
-        # ([heat.contact] / [heat.wall] gap_tolerance, drumheat.mechanics.make_dem)
-        # (the recording's and the output interval's accumulators take them at the thermal
-        # step: a per-step sum over the pairs cost ~0.1 ms per step at N = 1e4 on XLA:CPU)
-        # one step each (PairTimes: whole steps)
-        pm = contacts.pair_conducts.astype(jnp.int32)
-        wm = contacts.wall_conducts.astype(jnp.int32)
+    def accumulate(extra, state, pm, wm, steps, fr):
+        # the steps' counts of the conducting contacts added, and the thermal step where it
+        # falls due (after the last of them)
         fresh = extra.k == 0  # the first step after a thermal step
         pair = extra.pair._replace(time=jnp.where(fresh, 0, extra.pair.time) + pm)
-        fr = extra.friction
-        if friction:
-            d = contacts.dissipation
-            fr = fr._replace(E=fr.E + d.particle, E_walls=fr.E_walls + d.walls,
-                             E_sources=fr.E_sources + d.by_source)
         extra = extra.replace(pair=pair, wall_time=jnp.where(fresh, 0, extra.wall_time) + wm,
-                              k=extra.k + 1, friction=fr)
+                              k=extra.k + steps, friction=fr)
         ops = (state.nbrs.idx, state.position, state.time) if drum_wall else state.nbrs.idx
         if substeps == 1:
             return thermal_step(extra, ops)
@@ -273,7 +263,51 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
             go = jax.lax.psum(go.astype(jnp.int32), batch_axis) > 0
         return jax.lax.cond(go, thermal_step, lambda e, _: e, extra, ops)
 
-    return update
+    def update(extra, state, contacts, dt_):
+        # the contacts that conduct: overlapping or within the conduction gap tolerance
+        # ([heat.contact] / [heat.wall] gap_tolerance, drumheat.mechanics.make_dem)
+        # (the recording's and the output interval's accumulators take them at the thermal
+        # step: a per-step sum over the pairs cost ~0.1 ms per step at N = 1e4 on XLA:CPU)
+        # one step each (PairTimes: whole steps)
+        pm = contacts.pair_conducts.astype(jnp.int32)
+        wm = contacts.wall_conducts.astype(jnp.int32)
+        fr = extra.friction
+        if friction:
+            d = contacts.dissipation
+            fr = fr._replace(E=fr.E + d.particle, E_walls=fr.E_walls + d.walls,
+                             E_sources=fr.E_sources + d.by_source)
+        return accumulate(extra, state, pm, wm, 1, fr)
+
+    if friction or batch_axis is not None:  # each step's heat, or an ensemble's joint steps
+        return update
+
+    def free_steps(extra):
+        # up to the next thermal step, which comes after the last of them
+        return jnp.maximum(substeps - extra.k, 1).astype(jnp.int32)
+
+    def counted(extra, state, pair_counts, wall_counts, steps, dt_):
+        return accumulate(extra, state, pair_counts, wall_counts, steps, extra.friction)
+
+    return ThermalUpdate(update, free_steps, counted)
+
+
+class ThermalUpdate(CountingUpdate):
+    """The coupled heat's ``extra_update`` (:func:`make_thermal_update`) as a
+    :class:`~drumheat.mechanics.CountingUpdate`: between two thermal steps it only counts the
+    steps each contact conducts, so the DEM may hand it the counts of a run of steps at once
+    (``counted``; the same integers as step by step, the thermal step at the same step)."""
+
+    def __init__(self, update, free_steps, counted):
+        self._update, self._free_steps, self._counted = update, free_steps, counted
+
+    def __call__(self, extra, state, contacts, dt):
+        return self._update(extra, state, contacts, dt)
+
+    def free_steps(self, extra):
+        return self._free_steps(extra)
+
+    def counted(self, extra, state, pair_counts, wall_counts, steps, dt):
+        return self._counted(extra, state, pair_counts, wall_counts, steps, dt)
 
 
 def drum_wall_step(m: ThermalModel, extra: CoupledHeat, net: ContactNetwork, position, time,
