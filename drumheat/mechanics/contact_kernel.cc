@@ -44,6 +44,8 @@
 //     length 0: every wall's geometry given (inputs 9-11)
 //  23 the step's kicks and drift (below): a, c, c_I, dt, L (5) S, or length 0; 24 the forces
 //     and 25 the torques of the step before (N, D) and (N, 3) or (N) S (with 23)
+//  26 a run of steps (below): K, the most steps, and half the skin squared (2) S, or length 0
+//     (one step; with 26 also 20, 21, 23 and, with walls, the flags of output 16)
 // Attributes: dt, L (period of the last axis, 0 = none), law (conduction, < 0 = none), h
 // (its coefficient), tol (conduction gap tolerance), rot (0: no torques, no rolling), fh
 // (1: friction heat), cgap (the gap tolerance of output 11), wgap (that of output 16).
@@ -63,7 +65,20 @@
 // positions, 18 the velocities and 19 the spins after the step's kicks and drift, at which the
 // call computes the contacts (cpu_kernel.py aliases them with inputs 0-2, and the forces and
 // torques, outputs 0-1, with inputs 24-25: updated in place; the loop reads 24-25 only in the
-// pass that packs the records, before it sums a force).
+// pass that packs the records, before it sums a force); with input 26 (else length 0 each) 20
+// each pair slot's (M) and 21 each wall slot's (N W) count of the steps it conducted (the flags
+// of outputs 11 and 16 summed over the run's steps) s32 and 22 the steps made (1) s32.
+//
+// A run of steps (input 26; integrator.run_segments with a counting hook, the coupled heat's):
+// after the call's step, while fewer than K steps are made and the coming step's skin test
+// (output 15) is at most half the skin squared, the loop makes the next step as the next call
+// would: from this step's positions, half-step velocities and spins (outputs 17-19), forces
+// and torques (0-1) and springs (2, 6), its pending half-kick's factor a = 1. The steps between
+// two of the coupled heat's thermal steps need of the contacts only which ones conduct, so the
+// run hands back their counts (outputs 20-21); every other output is that of the last step but
+// output 9, the largest overlap ratio of all steps. The same numbers as one call per step:
+// each step's arithmetic is the call's, and the counts are integers. The loop's caller (XLA)
+// then returns only at a thermal step, a rebuild or the end of a chunk.
 //
 // The step's kicks and drift (inputs 23-25; integrator.run_segments): the positions, velocities
 // and spins given are those of the step before, the velocities and spins at its half step with

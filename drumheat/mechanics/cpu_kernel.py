@@ -384,21 +384,20 @@ def contacts(pos, vel, omega, radius, mass, inertia, ptype, idx, spring, wall_di
 
     Returns ``(force, torque, spring, overlap, distance, normal_force, wall_spring,
     wall_overlap, wall_normal_force, max_overlap, heat, conducts, pair_rows, wall_rows,
-    rates, ahead, wall_conducts, drifted, counted)``: contact forces (N, D) and torques (N, 3) or (N,)
-    on the particles (torques zero without ``rotation``); per pair the new springs (M, D),
-    overlap, centre distance and normal force (M, or length 0 without ``details``); per wall
+    rates, ahead, wall_conducts, drifted, counted)``: contact forces (N, D) and torques (N, 3)
+    or (N,) on the particles (torques zero without ``rotation``); per pair the new springs (M,
+    D), overlap, centre distance and normal force (M, or length 0 without ``details``); per wall
     slot the new springs (N, W, D), overlap and normal force (N, W); all zero where nothing
     touches; the largest overlap / radius (the smaller radius of a pair) (1,); the heat flow
     into each particle (N,) float64, W (length 0 without a conduction law); whether each pair
-    conducts (M,) bool: it overlaps or its surface gap is at most ``pair_gap`` times the
-    smaller diameter (:meth:`drumheat.mechanics.forces.ContactForces.pair_gap_mask`, the same
-    test); with
-    ``wall_distance_before`` (else length 0) each contact's friction-heat row (pairs (M, K_p),
-    wall slots (N W, K_w): force on B, levers, rolling torque, ``U_new - U_old``) and the step's
-    losses at the continuous rates (3,) float64, J: damping, sliding, rolling; with ``ahead``
-    (else length 0) the coming step's largest squared displacement (1,), m^2; with
-    ``wall_gap`` (else length 0) whether each wall slot conducts (N, W) bool: it touches, or
-    its surface gap is at most ``wall_gap`` times the particle's diameter
+    conducts (M,) bool: it overlaps or its surface gap is at most ``pair_gap`` times the smaller
+    diameter (:meth:`drumheat.mechanics.forces.ContactForces.pair_gap_mask`, the same test);
+    with ``wall_distance_before`` (else length 0) each contact's friction-heat row (pairs (M,
+    K_p), wall slots (N W, K_w): force on B, levers, rolling torque, ``U_new - U_old``) and the
+    step's losses at the continuous rates (3,) float64, J: damping, sliding, rolling; with
+    ``ahead`` (else length 0) the coming step's largest squared displacement (1,), m^2; with
+    ``wall_gap`` (else length 0) whether each wall slot conducts (N, W) bool: it touches, or its
+    surface gap is at most ``wall_gap`` times the particle's diameter
     (:meth:`drumheat.mechanics.forces.ContactForces.wall_gap_mask`, the same test); with
     ``drift`` (else None) the positions, velocities and spins after the step's kicks and drift
     ``(pos, vel, omega)``, updated in place; with ``steps`` (else None) ``counted`` as above.

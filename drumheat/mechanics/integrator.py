@@ -739,28 +739,8 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
             new = boundary_update(new)
         return new, contacts, res.ahead, (vh, wh)
 
-    def run_in_call(state: DEMState, aux, left):
-        # run_segments' steps that keep the list, as step_ahead with `aux` makes them one by
-        # one, up to `left` steps and the hook's next event, in one contact call (`runs`): it
-        # makes each step's kicks, drift and forces, its skin test of the coming step, and
-        # stops after a step whose test fails. Returns the state after them (half-step
-        # velocities and spins, as run_segments carries them), the steps made and the coming
-        # step's largest squared displacement. The time advances by dt per step, as each
-        # step adds it; the largest overlap ratio is the steps' largest, the hook's
-        # accumulators take the steps' counts (CountingUpdate.counted), the same integers.
-        most = jnp.minimum(jnp.minimum(left, extra_update.free_steps(state.extra)), 1 << 20)
-        res = forces(state.position, state.velocity, state.angular_velocity,
-                     state.time + dt_time, state.nbrs, state.pair_spring, state.wall_spring,
-                     ahead=ahead, drift=drift_args(state, aux), steps=(most, half_skin_sq))
-        (x, v, w), (pair_counts, wall_counts, done) = res.drifted, res.counted
-        done = done[0]
-        t = jax.lax.fori_loop(0, done, lambda _, t: t + dt_time, state.time)
-        new = state._replace(position=x, velocity=v, angular_velocity=w, force=res.force,
-                             torque=res.torque, time=t, step=state.step + done,
-                             pair_spring=res.pair_spring, wall_spring=res.wall_spring,
-                             max_overlap=jnp.maximum(state.max_overlap, res.max_overlap))
-        extra = extra_update.counted(state.extra, new, pair_counts, wall_counts, done, dt)
-        return new._replace(extra=extra), done, res.ahead
+    run_in_call = (_run_in_call(forces, extra_update, ahead, drift_args, dt, dt_time,
+                                half_skin_sq) if runs else None)
 
     energies = _energy_book(forces, rotation, dt)
 
@@ -801,7 +781,10 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         # the call also makes the kicks and drift (`drifts`), a step that keeps the list hands
         # it the carried state and its `aux`, and neither the condition nor the step computes
         # them in XLA; the step that rebuilds drifts in XLA, since the rebuild needs the new
-        # positions before the call.
+        # positions before the call. Where the hook only counts the conducting contacts
+        # between its events (`runs`: CountingUpdate, the coupled heat), such steps run in the
+        # call, as many as the hook lets pass before its next event (`run_in_call`): XLA then
+        # returns to the loop once per run, not once per step.
         pending = boundary_update is None
         in_call = pending and ahead is not None and state.position.dtype == dtype
 
@@ -848,6 +831,37 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
         return st._replace(velocity=v, angular_velocity=w)
 
     return step, run_steps, energies
+
+
+def _run_in_call(forces: ContactForces, extra_update: "CountingUpdate", ahead, drift_args, dt,
+                 dt_time, half_skin_sq):
+    """``run_in_call(state, aux, left)`` of :func:`_velocity_verlet`'s loop: a run of steps in
+    the contact call (``ContactForces.__call__(steps=...)``) with the hook's counts."""
+
+    def run_in_call(state: DEMState, aux, left):
+        # run_segments' steps that keep the list, as step_ahead with `aux` makes them one by
+        # one, up to `left` steps and the hook's next event, in one contact call (`runs`): it
+        # makes each step's kicks, drift and forces, its skin test of the coming step, and
+        # stops after a step whose test fails. Returns the state after them (half-step
+        # velocities and spins, as run_segments carries them), the steps made and the coming
+        # step's largest squared displacement. The time advances by dt per step, as each
+        # step adds it; the largest overlap ratio is the steps' largest, the hook's
+        # accumulators take the steps' counts (CountingUpdate.counted), the same integers.
+        most = jnp.minimum(jnp.minimum(left, extra_update.free_steps(state.extra)), 1 << 20)
+        res = forces(state.position, state.velocity, state.angular_velocity,
+                     state.time + dt_time, state.nbrs, state.pair_spring, state.wall_spring,
+                     ahead=ahead, drift=drift_args(state, aux), steps=(most, half_skin_sq))
+        (x, v, w), (pair_counts, wall_counts, done) = res.drifted, res.counted
+        done = done[0]
+        t = jax.lax.fori_loop(0, done, lambda _, t: t + dt_time, state.time)
+        new = state._replace(position=x, velocity=v, angular_velocity=w, force=res.force,
+                             torque=res.torque, time=t, step=state.step + done,
+                             pair_spring=res.pair_spring, wall_spring=res.wall_spring,
+                             max_overlap=jnp.maximum(state.max_overlap, res.max_overlap))
+        extra = extra_update.counted(state.extra, new, pair_counts, wall_counts, done, dt)
+        return new._replace(extra=extra), done, res.ahead
+
+    return run_in_call
 
 
 def _energy_book(forces: ContactForces, rotation: bool, dt):
@@ -1031,7 +1045,10 @@ def make_dem(
         assumption, Weigler digest sec. 4 [2.4]).
       rotation: integrate particle spin (False freezes it, like PFC's "fix spin").
       extra_update: ``extra_update(extra, state, contacts, dt) -> extra``, called at the end of
-        every step inside the scan (plug a thermal update in here).
+        every step inside the scan (plug a thermal update in here). A
+        :class:`CountingUpdate` (the coupled heat's) takes, between its own events, the
+        counts of the steps each contact conducted instead; with the C++ loop's drift the
+        steps between them then run in one contact call (the same numbers).
       external_force: ``external_force(position, velocity, t, extra) -> (N, dim)`` force (N)
         added to the contact forces and gravity every step (e.g. gas drag); it enters the
         second half-kick of the step, so it acts on the velocity at the new positions.

@@ -196,6 +196,11 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     state's :class:`FrictionBook` gathers each step's heat, and the next thermal step adds it
     to the temperatures and to the account ``Q["friction"]`` (and the walls' share and the
     sources to their totals), so that all of them are booked at the same instants.
+
+    Returns a :class:`ThermalUpdate` (a :class:`~drumheat.mechanics.CountingUpdate`: the DEM
+    may hand it the counts of the steps up to the next thermal step at once), or with
+    ``friction`` or ``batch_axis`` the plain hook (each step's heat is its own; an ensemble's
+    members step jointly).
     """
     h = substeps * dt
     heated = jnp.asarray(wall_heated, bool)
