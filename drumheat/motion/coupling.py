@@ -300,7 +300,10 @@ class ThermalUpdate(CountingUpdate):
     """The coupled heat's ``extra_update`` (:func:`make_thermal_update`) as a
     :class:`~drumheat.mechanics.CountingUpdate`: between two thermal steps it only counts the
     steps each contact conducts, so the DEM may hand it the counts of a run of steps at once
-    (``counted``; the same integers as step by step, the thermal step at the same step)."""
+    (``counted``; the same integers as step by step, the thermal step at the same step).
+
+    ``update``, ``free_steps``, ``counted``: the hook's three functions, as
+    :func:`make_thermal_update` builds them over one model, wall set and thermal step."""
 
     def __init__(self, update, free_steps, counted):
         self._update, self._free_steps, self._counted = update, free_steps, counted
