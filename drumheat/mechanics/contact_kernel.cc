@@ -207,6 +207,7 @@
 #include <thread>
 #include <type_traits>
 #include <vector>
+#include "kernel_math.h"
 #include "xla/ffi/api/ffi.h"
 namespace ffi = xla::ffi;
 
@@ -1243,7 +1244,7 @@ struct Ahead {
       S y = x[D*i + q] + u * dt;
       if (q == D - 1 && L > S(0)) y = y >= L ? y - L : (y < S(0) ? y + L : y);
       S d = (y - lo[q]) - ref[D*i + q];
-      if (q == D - 1 && L > S(0)) d = d - std::nearbyint(d * inv_L) * L;
+      if (q == D - 1 && L > S(0)) d = d - drumheat::round_to_even(d * inv_L) * L;
       s = q ? s + d * d : d * d;
     }
     return s;

@@ -84,6 +84,8 @@ TAKE_TARGET = "drumheat_take_pairs"  # per-pair data carried to a rebuilt list i
 SOURCE = Path(__file__).with_name("contact_kernel.cc")
 #: the sources compiled into the one library: the contact loop and the neighbour rebuild
 SOURCES = (SOURCE, Path(__file__).with_name("neighbor_kernel.cc"))
+#: the header both sources include (part of the library's cache key)
+HEADERS = (Path(__file__).with_name("kernel_math.h"),)
 #: compiler flags. None changes a number: -ffp-contract=off keeps a * b + c two roundings in the
 #: AVX2 / AVX-512 versions of the vector loops (contact_kernel.cc), which have fused
 #: multiply-adds, so that every version gives the numbers of the baseline x86-64 build;
@@ -122,8 +124,8 @@ def _compiler() -> tuple[list[str] | None, str]:
 def _library_path() -> Path:
     import jaxlib
 
-    key = hashlib.sha256("\n".join([*(f.read_text() for f in SOURCES), jaxlib.__version__,
-                                     *FLAGS]).encode())
+    texts = [f.read_text() for f in (*SOURCES, *HEADERS)]
+    key = hashlib.sha256("\n".join([*texts, jaxlib.__version__, *FLAGS]).encode())
     return _cache_dir() / f"contact_kernel_{key.hexdigest()[:16]}.so"
 
 

@@ -38,6 +38,7 @@
 #include <cstdint>
 #include <limits>
 #include <vector>
+#include "kernel_math.h"
 #include "xla/ffi/api/ffi.h"
 namespace ffi = xla::ffi;
 
@@ -73,19 +74,6 @@ bool numbering_will_do(const int32_t* P, int64_t m, int64_t w, const int32_t* or
     near_cells += std::abs(static_cast<int64_t>(rank[j]) - rank[i]) < NEAR;
   }
   return 2 * near_numbering >= near_cells;
-}
-
-// nearbyint(v) in the default rounding mode (to nearest, ties to even), without the call into
-// libm that the baseline x86-64 build makes of it (no rounding instruction before SSE4.1): the
-// call, once per candidate pair along a periodic axis, made the compiler keep the loop's values
-// on the stack around it. For |v| < 2^52 (2^23 in float), adding and subtracting 2^52 rounds to
-// an integer as the hardware rounds, and copysign keeps the sign of a zero; larger values are
-// integers already.
-template <typename S>
-inline S round_to_even(S v) {
-  const S big = S(1) / std::numeric_limits<S>::epsilon();
-  const S a = std::fabs(v);
-  return a < big ? std::copysign((a + big) - big, v) : v;
 }
 
 struct Grid {
@@ -158,7 +146,7 @@ void build(const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m, int64_
         if (j <= i) continue;
         S d[D];
         for (int a = 0; a < D; ++a) d[a] = x[D*j + a] - x[D*i + a];
-        if (D == 3 && periodic) d[D - 1] = d[D - 1] - L * round_to_even(d[D - 1] / L);
+        if (D == 3 && periodic) d[D - 1] = d[D - 1] - L * drumheat::round_to_even(d[D - 1] / L);
         S r2 = d[0]*d[0] + d[1]*d[1];
         if (D == 3) r2 = r2 + d[2]*d[2];
         if (r2 < cut2) cand.push_back(j);
