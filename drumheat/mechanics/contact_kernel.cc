@@ -78,7 +78,10 @@
 // run hands back their counts (outputs 20-21); every other output is that of the last step but
 // output 9, the largest overlap ratio of all steps. The same numbers as one call per step:
 // each step's arithmetic is the call's, and the counts are integers. The loop's caller (XLA)
-// then returns only at a thermal step, a rebuild or the end of a chunk.
+// then returns only at a thermal step, a rebuild or the end of a chunk. The steps share what
+// depends only on the list (the chunks, the cell order's layout: Shared) and the threads
+// (Team), and a step after the first leaves the padding slots' outputs as the first wrote
+// them (the same buffers).
 //
 // The step's kicks and drift (inputs 23-25; integrator.run_segments): the positions, velocities
 // and spins given are those of the step before, the velocities and spins at its half step with
@@ -166,20 +169,28 @@
 // 0 .. N-1, which the build gives while the particles' own numbering keeps neighbours near in
 // memory (NeighborSetup.layout_order), means no reordering: the loop runs as without an order.
 //
-// Threads: the particles are cut into C equal ranges (of indices, or of ranks in the cell
-// order), C = the threads of XLA's intra-op pool, at most one per MIN_CHUNK listed pairs
-// (DRUMHEAT_KERNEL_THREADS sets C); chunk c takes the pair slots whose first particle i lies in
-// range c (the pairs come sorted by i or grouped in the cell order, padding last, as
-// neighbors.sort_pairs leaves them; any other list is computed right, in uneven chunks: see
-// `chunks`), the wall slots of the particles of index range c and an equal share of the padding
-// slots (whose outputs are only zeroed). Cut by particles, the chunks share the work evenly
-// however many padding slots the list has (cut by slots, the first chunk took nearly all the
-// pairs of a list half padding), and each pair's chunk does not depend on the capacity or the
-// skin of the list. Both passes (Contacts and ContactHeat) cut their chunks so. The calling
-// thread runs chunk 0 and then takes any chunk no pool thread has started; chunk c accumulates
-// its forces (and the second pass its heat) in its own buffer and the buffers are summed in
-// chunk order, so the result depends on C (round-off) and on nothing else, whichever thread ran
-// which chunk.
+// Threads: the pair slots are cut into C chunks, C = the threads of XLA's intra-op pool, at
+// most one per MIN_CHUNK listed pairs (DRUMHEAT_KERNEL_THREADS sets C): chunk c takes the
+// groups of the particles (indices, or ranks in the cell order) from the first particle of the
+// listed pair listed c / C on (the pairs come sorted by i or grouped in the cell order, padding
+// last, as neighbors.sort_pairs leaves them; any other list is computed right, in uneven
+// chunks: see `chunks`), the wall slots of the particles of index range c of C equal ones and
+// an equal share of the padding slots (whose outputs are only zeroed); the passes over the
+// particles take C equal ranges. Cut by listed pairs in whole particles' groups, the chunks
+// share the pair work evenly however many padding slots the list has (cut by slots, the first
+// chunk took nearly all the pairs of a list half padding) and however unevenly the pairs fall
+// on the particles (cut in equal particle ranges, the built-in drum's first chunk took 53 % of
+// the pairs and ran 15-18 % longer than the second); a pair's chunk does not depend on the list's
+// capacity, but on its listed pairs (its skin, and where it was built): the sums of the
+// chunks meet at other particles, round-off. Both passes (Contacts and ContactHeat) cut their
+// chunks so. The passes of a call are made by one Team: its C - 1 pool threads stay with the
+// call, waiting between the passes, and the calling thread takes any chunk no pool thread has
+// started (handed each pass anew, the pool thread began the contact pass some 40 us after it
+// was handed over, on average, and the pass that adds the sums mostly only after the calling
+// thread had made both chunks). Chunk c
+// accumulates its forces (and the second pass its heat) in its own buffer and the buffers are
+// summed in chunk order, so the result depends on C and the list (round-off) and on nothing
+// else, whichever thread ran which chunk.
 //
 // Records: each call first copies the particles' positions and radii, and their velocities,
 // spins, masses and moments of inertia, into one record per particle each (pack_particles; 12
@@ -641,26 +652,6 @@ void give_buffer(std::unique_ptr<Buffer> b) {
   g_bufs.push_back(std::move(b));
 }
 
-// Chunks 1..C-1 offered to the pool; see the header for the protocol's purpose. A pool task
-// registers in `active` before it looks at `closed`, and the caller sets `closed` before it
-// waits for `active` to drop to zero, so no task touches the caller's frame after it returns.
-struct Job {
-  std::atomic<int> next{1};
-  std::atomic<int> active{0};
-  std::atomic<bool> closed{false};
-  int nchunks = 1;
-  std::function<void(int)> run;
-};
-
-void help(const std::shared_ptr<Job>& job) {
-  job->active.fetch_add(1);
-  if (!job->closed.load()) {
-    for (int c = job->next.fetch_add(1); c < job->nchunks; c = job->next.fetch_add(1))
-      job->run(c);
-  }
-  job->active.fetch_sub(1);
-}
-
 // The chunks of a call (see the header): chunk c takes the pair slots [kb[c], kb[c + 1]), the
 // padding slots [pb[c], pb[c + 1]) (an equal share of the slots past the listed pairs of a
 // list sorted by i: they only need their outputs zeroed, which would otherwise fall on the
@@ -673,7 +664,8 @@ struct Chunks {
 };
 
 // the chunks for the pairs P (2, M) of n particles with nw walls: C from the listed pairs (the
-// slots before the padding i = n), the pair slots cut where the particle ranges begin. rk: null
+// slots before the padding i = n), the pair slots cut where the groups of the particles of the
+// listed pairs listed c / C begin. rk: null
 // (the ranges are of particle indices, for a list sorted by i) or each particle's rank in the
 // cell order (ranges of ranks, for a list grouped in that order, Loop::RK). The cuts are found
 // by binary searches, which assume the list so sorted, as the neighbour builds leave it; any
@@ -706,25 +698,104 @@ Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int
   if (nc < 1) nc = 1;
   Chunks ch{n, nw, nc, std::vector<int64_t>(nc + 1, listed), std::vector<int64_t>(nc + 1, m)};
   for (int64_t c = 0; c < nc; ++c) {
-    ch.kb[c] = c == 0 ? 0 : std::min(std::max(first_at_least(n * c / nc), ch.kb[c - 1]), listed);
+    // chunk c from the first particle (index or rank) of the listed pair listed c / C on: as
+    // many listed pairs in each chunk as whole particles' groups allow
+    const int64_t cut = c == 0 || listed == 0 ? n * c / nc : key(listed * c / nc);
+    ch.kb[c] = c == 0 ? 0 : std::min(std::max(first_at_least(cut), ch.kb[c - 1]), listed);
     ch.pb[c] = listed + (m - listed) * c / nc;
   }
   return ch;
 }
 
-// run(c) for the chunks c = 0 .. nc - 1: chunk 0 on the calling thread, the others on whichever
-// thread takes them first; returns when all are done
-void for_chunks(ffi::ThreadPool& pool, int64_t nc, std::function<void(int)> run) {
-  if (nc == 1) { run(0); return; }
-  auto job = std::make_shared<Job>();
-  job->nchunks = static_cast<int>(nc);
-  job->run = std::move(run);
-  for (int64_t t = 1; t < nc; ++t) pool.Schedule([job] { help(job); });
-  job->run(0);
-  for (int c = job->next.fetch_add(1); c < job->nchunks; c = job->next.fetch_add(1)) job->run(c);
-  job->closed.store(true);
-  while (job->active.load() != 0) std::this_thread::yield();
-}
+// The threads of one call's passes (see the header, Threads): team.each(run) runs run(c) for
+// the chunks c = 0 .. size() - 1 and returns when all are done. The team's pool threads
+// (size() - 1 of them, each a task given to the pool when the team is made) stay with the
+// team until it is destroyed, waiting between the passes, so that a pass does not wait for a
+// pool thread to wake up; the calling thread takes any chunk no pool thread has started, so
+// the passes get done whether the pool's threads come or not.
+class Team {
+ public:
+  Team(ffi::ThreadPool& pool, int64_t nc) : st_(std::make_shared<State>()) {
+    st_->nc = static_cast<int>(nc);
+    for (int64_t t = 1; t < nc; ++t) {
+      std::shared_ptr<State> st = st_;
+      pool.Schedule([st] { member(*st); });
+    }
+  }
+  ~Team() {  // no pool thread touches the caller's frame after this
+    st_->closed.store(true, std::memory_order_release);
+    while (st_->active.load(std::memory_order_acquire) != 0) std::this_thread::yield();
+  }
+  Team(const Team&) = delete;
+  Team& operator=(const Team&) = delete;
+  int64_t size() const { return st_->nc; }
+
+  void each(const std::function<void(int)>& run) {
+    State& s = *st_;
+    if (s.nc == 1) { run(0); return; }
+    s.run = &run;
+    s.done.store(0, std::memory_order_relaxed);
+    ++pass_;
+    s.word.store(static_cast<uint64_t>(pass_) << 32, std::memory_order_release);
+    claim(s);
+    for (int spins = 0; s.done.load(std::memory_order_acquire) < s.nc; ++spins) wait(spins);
+  }
+
+ private:
+  // The pass's number (the high 32 bits) and its next unclaimed chunk (the low 32) in one
+  // word: a chunk is claimed by one compare-and-swap of both, so a thread that read the word
+  // of a pass before the next one began can claim nothing of either; the number of chunks
+  // is the same for every pass (a claim past it runs nothing). A pool thread registers in
+  // `active` before it looks at `closed`, and the caller sets `closed` before it waits for
+  // `active` to drop to zero.
+  static constexpr uint64_t kIndex = 0xffffffffu;
+  struct State {
+    std::atomic<uint64_t> word{kIndex};  // (no pass yet: nothing to claim)
+    std::atomic<int> done{0};  // the chunks of the pass finished
+    std::atomic<int> active{0};
+    std::atomic<bool> closed{false};
+    int nc = 1;
+    const std::function<void(int)>* run = nullptr;  // the pass's (set before its word)
+  };
+
+  // claims and runs the chunks of the word's pass that are left
+  static void claim(State& s) {
+    uint64_t w = s.word.load(std::memory_order_acquire);
+    while ((w & kIndex) < static_cast<uint64_t>(s.nc)) {
+      if (s.word.compare_exchange_weak(w, w + 1, std::memory_order_acq_rel,
+                                       std::memory_order_acquire)) {
+        (*s.run)(static_cast<int>(w & kIndex));
+        s.done.fetch_add(1, std::memory_order_release);
+        w = s.word.load(std::memory_order_acquire);
+      }
+    }
+  }
+  // a pause in a wait, the processor's spin hint at first, then the thread's time slice given up
+  static void wait(int spins) {
+    if (spins < 4096) {
+#if defined(__x86_64__) || defined(__i386__)
+      __builtin_ia32_pause();
+#endif
+    } else {
+      std::this_thread::yield();
+    }
+  }
+  static void member(State& s) {
+    s.active.fetch_add(1, std::memory_order_acq_rel);
+    for (int spins = 0; !s.closed.load(std::memory_order_acquire); ++spins) {
+      if ((s.word.load(std::memory_order_acquire) & kIndex) < static_cast<uint64_t>(s.nc)) {
+        claim(s);
+        spins = 0;
+      } else {
+        wait(spins);
+      }
+    }
+    s.active.fetch_sub(1, std::memory_order_acq_rel);
+  }
+
+  std::shared_ptr<State> st_;
+  uint32_t pass_ = 0;
+};
 
 // the buffers of one call, untyped (their dtype is checked in ContactsImpl)
 struct Call {
@@ -753,6 +824,9 @@ struct Call {
   // the steps made (output 22)
   const void* steps = nullptr;
   int32_t *PC = nullptr, *WC = nullptr, *DONE = nullptr;
+  // a step of a run after its first: the per-slot outputs are the step before's buffers, in
+  // which the padding slots' are written already (run_steps)
+  bool later = false;
   void *F, *T, *S, *OV, *DI, *FN, *WS, *WO, *WF, *MX, *PW, *WW;
   double *Q, *R;
   bool* CD;
@@ -866,6 +940,7 @@ struct Loop {
     int64_t near[BLOCK];
     std::unique_ptr<Tile<S, D>> tl(new Tile<S, D>);  // off the thread's stack
     std::unique_ptr<Block<S, D>> bl(new Block<S, D>);
+    if (one_type) fill_law(*tl, pp[0]);
     const unsigned char* within = bl->within;
     for (int64_t b0 = k0; b0 < k1; b0 += BLOCK) {
       const int64_t b1 = b0 + BLOCK < k1 ? b0 + BLOCK : k1;
@@ -936,8 +1011,7 @@ struct Loop {
       t.dist2[q] = bl.dist2[b]; t.ri[q] = XRp[XR*i + D]; t.rj[q] = XRp[XR*j + D];
       t.mi[q] = ui[D + DW]; t.mj[q] = uj[D + DW];
       if (roll_pp) { t.ii[q] = ui[D + DW + 1]; t.ij[q] = uj[D + DW + 1]; }
-      t.kn[q] = law.kn; t.kt[q] = law.kt; t.gn[q] = law.gn; t.gt[q] = law.gt;
-      t.mu[q] = law.mu; t.mur[q] = law.mur;
+      if (!one_type) set_law(t, q, law);  // (one material: the tile holds its law already)
       if (fh) {  // before the spring is written
         t.ov0[q] = overlap0(i, j);
         t.xi2[q] = spring2(k);
@@ -990,6 +1064,15 @@ struct Loop {
       if (r_ov > max_ov) max_ov = r_ov;
     }
     return max_ov;
+  }
+
+  // the law of the material pair c in the tile's slot q, and in all of them
+  static void set_law(Tile<S, D>& t, int q, const Law<S>& c) {
+    t.kn[q] = c.kn; t.kt[q] = c.kt; t.gn[q] = c.gn; t.gt[q] = c.gt; t.mu[q] = c.mu;
+    t.mur[q] = c.mur;
+  }
+  static void fill_law(Tile<S, D>& t, const Law<S>& c) {
+    for (int q = 0; q < Tile<S, D>::N; ++q) set_law(t, q, c);
   }
 
   // pair_law_tile for this call's torques and rolling resistance
@@ -1114,20 +1197,47 @@ bool ranks(const int32_t* order, int64_t n, int32_t* rk) {
   return true;
 }
 
-// the temperatures in the cell order (with conduction), and the ranks, for lp
-template <typename S, int D>
-void gather_temperatures(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp, const Layout& lay,
-                         Buffer& buf) {
-  const int64_t n = lp.n;
-  const int32_t* od = lp.a.order;
-  if (lp.heat_on) {
-    double* ts = lay.temp(buf);
-    for_chunks(pool, nc, [&](int c) {
-      for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) ts[p] = lp.TK[od[p]];
-    });
-    lp.TK = ts;
+// What the steps of one call share (run_steps: the steps of a run have the same list, order
+// and temperatures): whether the cell order lays the data out (`ranked`), the layout's buffer
+// (the ranks, and with conduction the temperatures in the cell order) and the chunks
+struct Shared {
+  bool ranked = false;
+  Layout layout{0};
+  std::unique_ptr<Buffer> lay;
+  Chunks ch;
+  const double* temp = nullptr;  // the temperatures as the loop reads them
+  const int32_t* rank = nullptr;  // null, or each particle's rank in the cell order
+  Shared() = default;
+  Shared(const Shared&) = delete;
+  Shared& operator=(const Shared&) = delete;
+  ~Shared() { if (lay) give_buffer(std::move(lay)); }
+};
+
+// the layout and the chunks of call a into sh; false if its order is not a permutation
+bool share(ffi::ThreadPool& pool, const Call& a, Shared& sh) {
+  const int64_t n = a.n;
+  sh.ranked = layout_in_use(a.order, n);
+  sh.layout = Layout(n);
+  sh.temp = a.temp;
+  if (sh.ranked) {
+    sh.lay = take_buffer(sh.layout.doubles());
+    if (!ranks(a.order, n, sh.layout.rank(*sh.lay))) return false;
+    sh.rank = sh.layout.rank(*sh.lay);
   }
-  lp.RK = lay.rank(buf);
+  sh.ch = chunks(pool, a.P, n, a.m, a.nw, sh.rank);
+  return true;
+}
+
+// with the cell order and conduction, the temperatures in that order (sh.temp)
+void gather_temperatures(Team& team, const Call& a, Shared& sh) {
+  if (!sh.ranked || a.law < 0) return;
+  const int64_t n = a.n, nc = team.size();
+  const int32_t* od = a.order;
+  double* ts = sh.layout.temp(*sh.lay);
+  team.each([&](int c) {
+    for (int64_t p = n*c/nc; p < n*(c + 1)/nc; ++p) ts[p] = a.temp[od[p]];
+  });
+  sh.temp = ts;
 }
 
 // The step's kicks and drift (inputs 23-25, see the header): step(i) writes particle i's x', v'
@@ -1200,8 +1310,7 @@ DRUMHEAT_FMA_CLONES void pack_range(const Loop<S, D>& lp, const Drift<S, D>& dr,
 // them (and lp.RHO, with the drum shell, to the particles' distances from its axis); the
 // caller gives the buffer back when the loop is done.
 template <typename S, int D>
-std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S, D>& lp,
-                                       const int32_t* od) {
+std::unique_ptr<Buffer> pack_particles(Team& team, Loop<S, D>& lp, const int32_t* od) {
   constexpr int DW = Loop<S, D>::DW;
   static_assert(D + 1 <= XR && D + DW + 2 <= VW, "a record holds the particle's data");
   const int64_t n = lp.n;
@@ -1211,7 +1320,8 @@ std::unique_ptr<Buffer> pack_particles(ffi::ThreadPool& pool, int64_t nc, Loop<S
   S* vw = xr + XR*n;
   S* rho = lp.SH ? vw + VW*n : nullptr;
   const Drift<S, D> dr(lp.a);
-  for_chunks(pool, nc, [&](int c) {
+  const int64_t nc = team.size();
+  team.each([&](int c) {
     pack_range<S, D>(lp, dr, od, n*c/nc, n*(c + 1)/nc, xr, vw, rho);
   });
   lp.XRp = xr;
@@ -1251,29 +1361,25 @@ struct Ahead {
   }
 };
 
+// One step: the contacts of call a, with the layout and chunks sh and the team's threads
 template <typename S, int D>
-bool run(ffi::ThreadPool& pool, const Call& a) {
+bool run(Team& team, const Shared& sh, const Call& a) {
   constexpr int DW = Loop<S, D>::DW;
   Loop<S, D> lp(a);
-  const int64_t n = a.n, m = a.m;
+  const int64_t n = a.n;
   const bool heat_on = lp.heat_on;
   // with a cell order the pairs are taken in the list's order (grouped in the cell order by
   // the neighbour build), the chunks are ranges of ranks and sum at the ranks, every chunk into
   // its own buffer, and the sums are put back in the particles' numbering at the end; without,
   // chunk 0 sums into the outputs
-  const bool ranked = layout_in_use(a.order, n);
-  const Layout layout(n);
-  std::unique_ptr<Buffer> lay;
-  if (ranked) {
-    lay = take_buffer(layout.doubles());
-    if (!ranks(a.order, n, layout.rank(*lay))) { give_buffer(std::move(lay)); return false; }
-  }
-  const Chunks ch = chunks(pool, a.P, n, m, a.nw, ranked ? layout.rank(*lay) : nullptr);
+  const bool ranked = sh.ranked;
+  const Chunks& ch = sh.ch;
   const int64_t nc = ch.nc;
-  if (ranked) gather_temperatures<S, D>(pool, nc, lp, layout, *lay);
-  std::unique_ptr<Buffer> packed = pack_particles<S, D>(pool, nc, lp, ranked ? a.order : nullptr);
+  lp.TK = sh.temp;
+  lp.RK = sh.rank;
+  std::unique_ptr<Buffer> packed = pack_particles<S, D>(team, lp, ranked ? a.order : nullptr);
   auto work = [&](const Chunks& ch, int64_t c, S* F, S* T, double* Q, double* R) -> S {
-    lp.padding(ch.pb[c], ch.pb[c + 1]);
+    if (!a.later) lp.padding(ch.pb[c], ch.pb[c + 1]);
     const S p = lp.pairs(ch.kb[c], ch.kb[c + 1], F, T, Q, R);
     const S q = lp.walls(ch.s0(c), ch.s1(c), F, T, R);
     return p > q ? p : q;
@@ -1282,12 +1388,6 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   S* F0 = static_cast<S*>(a.F);
   S* T0 = static_cast<S*>(a.T);
   double *Q0 = a.Q, *R0 = a.R;
-  if (!ranked) {
-    std::memset(F0, 0, sizeof(S) * D * n);
-    std::memset(T0, 0, sizeof(S) * DW * n);
-    if (heat_on) std::memset(Q0, 0, sizeof(double) * n);
-    std::memset(R0, 0, sizeof(double) * 3);
-  }
   S* MX = static_cast<S*>(a.MX);
   // a buffer holds the (D + DW) N forces and torques in its first fs doubles, then N doubles
   // of conduction heat, then 3 of loss rates
@@ -1296,16 +1396,17 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   std::vector<std::unique_ptr<Buffer>> acc(nc - own);
   for (auto& b : acc) b = take_buffer(fs + n + 3);
   std::vector<S> mx(nc, S(0));
-  for_chunks(pool, nc, [&](int c) {
+  team.each([&](int c) {
     S *F = F0, *T = T0;
     double *Q = Q0, *R = R0;
     if (c >= own) {
       double* b = acc[c - own]->data();
       F = reinterpret_cast<S*>(b); T = F + D * n; Q = b + fs; R = b + fs + n;
-      std::memset(b, 0, sizeof(double) * fs);
-      std::memset(R, 0, sizeof(double) * 3);
-      if (heat_on) std::memset(Q, 0, sizeof(double) * n);
     }
+    std::memset(F, 0, sizeof(S) * D * n);
+    std::memset(T, 0, sizeof(S) * DW * n);
+    if (heat_on) std::memset(Q, 0, sizeof(double) * n);
+    std::memset(R, 0, sizeof(double) * 3);
     mx[c] = work(ch, c, F, T, Q, R);
   });
   S max_ov = mx[0];
@@ -1318,7 +1419,7 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
   if (!ranked) {
     // the other chunks' sums added to chunk 0's, for each value in chunk order, then the body
     // force (the order of the terms of each sum does not depend on how the particles are cut)
-    for_chunks(pool, nc, [&](int cc) {
+    team.each([&](int cc) {
       const int64_t p0 = n*cc/nc, p1 = n*(cc + 1)/nc;
       for (int64_t c = 1; c < nc; ++c) {
         const double* b = acc[c - 1]->data();
@@ -1338,7 +1439,7 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
       for (int q = 0; q < 3; ++q) R0[q] += acc[c - 1]->data()[fs + n + q];
   } else {  // the chunks' sums, added in chunk order as above, back in the particles' numbering
     const int32_t* od = a.order;
-    for_chunks(pool, nc, [&](int cc) {
+    team.each([&](int cc) {
       for (int64_t p = n*cc/nc; p < n*(cc + 1)/nc; ++p) {
         const int64_t u = od[p];
         S f[D], t[DW];
@@ -1364,7 +1465,6 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
       }
       R0[q] = r;
     }
-    give_buffer(std::move(lay));
   }
   for (auto& b : acc) give_buffer(std::move(b));
   give_buffer(std::move(packed));
@@ -1384,7 +1484,11 @@ bool run(ffi::ThreadPool& pool, const Call& a) {
 // largest overlap ratio of all steps
 template <typename S, int D>
 bool run_steps(ffi::ThreadPool& pool, const Call& a) {
-  if (!a.steps) return run<S, D>(pool, a);
+  Shared sh;
+  if (!share(pool, a, sh)) return false;
+  Team team(pool, sh.ch.nc);
+  gather_temperatures(team, a, sh);
+  if (!a.steps) return run<S, D>(team, sh, a);
   const S* st = static_cast<const S*>(a.steps);
   const int64_t most = static_cast<int64_t>(st[0]);
   const S half_skin2 = st[1];
@@ -1398,13 +1502,14 @@ bool run_steps(ffi::ThreadPool& pool, const Call& a) {
   S mx = S(0);
   int32_t done = 0;
   while (true) {
-    if (!run<S, D>(pool, b)) return false;
+    if (!run<S, D>(team, sh, b)) return false;
     ++done;
     const S m = MX[0];
     if (m > mx || m != m) mx = m;  // (a NaN carried, as jnp.maximum)
     if (done >= most || static_cast<const S*>(a.AH)[0] > half_skin2) break;
     b.x = b.DX; b.v = b.DV; b.w = b.DWo; b.df = b.F; b.dtq = b.T; b.sp = b.S; b.ws = b.WS;
     b.drift = kick;
+    b.later = true;
   }
   MX[0] = mx;
   a.DONE[0] = done;
@@ -1472,7 +1577,8 @@ bool heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
   const int64_t nc = ch.nc;
   std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
   for (auto& b : acc) b = take_buffer(n + 2);
-  for_chunks(pool, nc, [&](int c) {
+  Team team(pool, nc);
+  team.each([&](int c) {
     double *E = E0, *sums = S0;
     if (c > 0) {
       E = acc[c - 1]->data(); sums = E + n;
