@@ -13,10 +13,11 @@ the JAX walls, so every wall type works. With ``make_dem(..., conduction=...)`` 
 sums the contact heat flows (:mod:`drumheat.mechanics.conduction`, both laws, with its gap
 tolerance). The loop is cut into as many chunks as XLA's intra-op thread pool has threads (at
 most one per 8 000 listed pairs; ``DRUMHEAT_KERNEL_THREADS`` sets the number), each a range of
-particles with their pairs (the list is grouped by the first particle), and run on that
-pool, so no threads are started per step; each chunk sums into its own buffer and the buffers
-are added in chunk order, so the result depends on the chunk count by round-off and on nothing
-else. Once the particles' numbering has lost most of its pairs near in memory (a mixed bed),
+particles with about as many listed pairs as the others (the list is grouped by the first
+particle), and run on that pool, so no threads are started per step: the pool's threads stay
+with the call for all its passes (and a run's steps); each chunk sums into its own buffer and
+the buffers are added in chunk order, so the result depends on the chunk count and on the
+listed pairs by round-off and on nothing else. Once the particles' numbering has lost most of its pairs near in memory (a mixed bed),
 the lists of such runs go over to the cell order (``NeighborList.order``,
 :mod:`drumheat.mechanics.neighbors`): the loop then lays the particles' data out in that order
 and takes the pairs as listed, so that it reads memory in the order of the particles' places
