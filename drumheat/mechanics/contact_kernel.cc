@@ -180,17 +180,16 @@
 // share the pair work evenly however many padding slots the list has (cut by slots, the first
 // chunk took nearly all the pairs of a list half padding) and however unevenly the pairs fall
 // on the particles (cut in equal particle ranges, the built-in drum's first chunk took 53 % of
-// the pairs and ran 15-18 % longer than the second); a pair's chunk does not depend on the list's
-// capacity, but on its listed pairs (its skin, and where it was built): the sums of the
-// chunks meet at other particles, round-off. Both passes (Contacts and ContactHeat) cut their
+// the pairs and ran 15-18 % longer than the second); a pair's chunk does not depend on the
+// list's capacity, but on its listed pairs (its skin, and where it was built): the sums of
+// the chunks meet at other particles, round-off. Both passes (Contacts and ContactHeat) cut their
 // chunks so. The passes of a call are made by one Team: its C - 1 pool threads stay with the
 // call, waiting between the passes, and the calling thread takes any chunk no pool thread has
 // started (handed each pass anew, the pool thread began the contact pass some 40 us after it
 // was handed over, on average, and the pass that adds the sums mostly only after the calling
-// thread had made both chunks). Chunk c
-// accumulates its forces (and the second pass its heat) in its own buffer and the buffers are
-// summed in chunk order, so the result depends on C and the list (round-off) and on nothing
-// else, whichever thread ran which chunk.
+// thread had made both chunks). Chunk c accumulates its forces (and the second pass its heat)
+// in its own buffer and the buffers are summed in chunk order, so the result depends on C and
+// the list (round-off) and on nothing else, whichever thread ran which chunk.
 //
 // Records: each call first copies the particles' positions and radii, and their velocities,
 // spins, masses and moments of inertia, into one record per particle each (pack_particles; 12
@@ -738,7 +737,7 @@ class Team {
     ++pass_;
     s.word.store(static_cast<uint64_t>(pass_) << 32, std::memory_order_release);
     claim(s);
-    for (int spins = 0; s.done.load(std::memory_order_acquire) < s.nc; ++spins) wait(spins);
+    for (int spins = 0; s.done.load(std::memory_order_acquire) < s.nc;) wait(spins);
   }
 
  private:
@@ -770,9 +769,11 @@ class Team {
       }
     }
   }
-  // a pause in a wait, the processor's spin hint at first, then the thread's time slice given up
-  static void wait(int spins) {
+  // a pause in a wait (`spins` the pauses so far, counted up to the limit): the processor's
+  // spin hint at first, then the thread's time slice given up
+  static void wait(int& spins) {
     if (spins < 4096) {
+      ++spins;
 #if defined(__x86_64__) || defined(__i386__)
       __builtin_ia32_pause();
 #endif
@@ -782,7 +783,7 @@ class Team {
   }
   static void member(State& s) {
     s.active.fetch_add(1, std::memory_order_acq_rel);
-    for (int spins = 0; !s.closed.load(std::memory_order_acquire); ++spins) {
+    for (int spins = 0; !s.closed.load(std::memory_order_acquire);) {
       if ((s.word.load(std::memory_order_acquire) & kIndex) < static_cast<uint64_t>(s.nc)) {
         claim(s);
         spins = 0;
@@ -1213,23 +1214,26 @@ struct Shared {
   ~Shared() { if (lay) give_buffer(std::move(lay)); }
 };
 
-// the layout and the chunks of call a into sh; false if its order is not a permutation
-bool share(ffi::ThreadPool& pool, const Call& a, Shared& sh) {
-  const int64_t n = a.n;
-  sh.ranked = layout_in_use(a.order, n);
+// the layout and the chunks of the pairs P (2, M) of n particles with nw walls in the cell
+// order `order` (null: none) into sh, for both passes (Contacts, ContactHeat); false if the
+// order is not a permutation
+bool share(ffi::ThreadPool& pool, const int32_t* P, const int32_t* order, int64_t n, int64_t m,
+           int64_t nw, Shared& sh) {
+  sh.ranked = layout_in_use(order, n);
   sh.layout = Layout(n);
-  sh.temp = a.temp;
   if (sh.ranked) {
     sh.lay = take_buffer(sh.layout.doubles());
-    if (!ranks(a.order, n, sh.layout.rank(*sh.lay))) return false;
+    if (!ranks(order, n, sh.layout.rank(*sh.lay))) return false;
     sh.rank = sh.layout.rank(*sh.lay);
   }
-  sh.ch = chunks(pool, a.P, n, a.m, a.nw, sh.rank);
+  sh.ch = chunks(pool, P, n, m, nw, sh.rank);
   return true;
 }
 
-// with the cell order and conduction, the temperatures in that order (sh.temp)
+// the temperatures of call a as the loop reads them (sh.temp): with the cell order and
+// conduction, in that order
 void gather_temperatures(Team& team, const Call& a, Shared& sh) {
+  sh.temp = a.temp;
   if (!sh.ranked || a.law < 0) return;
   const int64_t n = a.n, nc = team.size();
   const int32_t* od = a.order;
@@ -1485,7 +1489,7 @@ bool run(Team& team, const Shared& sh, const Call& a) {
 template <typename S, int D>
 bool run_steps(ffi::ThreadPool& pool, const Call& a) {
   Shared sh;
-  if (!share(pool, a, sh)) return false;
+  if (!share(pool, a.P, a.order, a.n, a.m, a.nw, sh)) return false;
   Team team(pool, sh.ch.nc);
   gather_temperatures(team, a, sh);
   if (!a.steps) return run<S, D>(team, sh, a);
@@ -1570,10 +1574,9 @@ bool heat_pass(ffi::ThreadPool& pool, const HeatCall& a) {
   std::memset(E0, 0, sizeof(double) * n);
   S0[0] = S0[1] = 0.0;
   // the chunks as the first pass cuts them
-  const bool ranked = layout_in_use(a.order, n);
-  std::vector<int32_t> rk(ranked ? n : 0);
-  if (ranked && !ranks(a.order, n, rk.data())) return false;
-  const Chunks ch = chunks(pool, P, n, m, nw, ranked ? rk.data() : nullptr);
+  Shared sh;
+  if (!share(pool, P, a.order, n, m, nw, sh)) return false;
+  const Chunks& ch = sh.ch;
   const int64_t nc = ch.nc;
   std::vector<std::unique_ptr<Buffer>> acc(nc - 1);
   for (auto& b : acc) b = take_buffer(n + 2);

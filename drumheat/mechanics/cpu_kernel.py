@@ -17,10 +17,11 @@ particles with about as many listed pairs as the others (the list is grouped by 
 particle), and run on that pool, so no threads are started per step: the pool's threads stay
 with the call for all its passes (and a run's steps); each chunk sums into its own buffer and
 the buffers are added in chunk order, so the result depends on the chunk count and on the
-listed pairs by round-off and on nothing else. Once the particles' numbering has lost most of its pairs near in memory (a mixed bed),
-the lists of such runs go over to the cell order (``NeighborList.order``,
-:mod:`drumheat.mechanics.neighbors`): the loop then lays the particles' data out in that order
-and takes the pairs as listed, so that it reads memory in the order of the particles' places
+listed pairs by round-off and on nothing else. Once the particles' numbering has lost most of
+its pairs near in memory (a mixed bed), the lists of such runs go over to the cell order
+(``NeighborList.order``, :mod:`drumheat.mechanics.neighbors`): the loop then lays the
+particles' data out in that order and takes the pairs as listed, so that it reads memory in
+the order of the particles' places
 (what that is worth: docs/performance.md). The pair and wall springs are updated in place
 (aliased buffers). Speed:
 docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
