@@ -181,6 +181,38 @@ def test_a_numbering_that_keeps_neighbours_near_is_kept():
                                   np.asarray(jx.grid.order(jx.to_box(shuffled))))
 
 
+@pytest.mark.parametrize("dim,periodic,pair_order", [(3, 0.12, "cell"), (2, None, "index"),
+                                                     (3, 0.08, "index")])
+def test_the_search_on_several_threads_is_the_one_threads(monkeypatch, dim, periodic,
+                                                          pair_order):
+    """The build's search split between threads (DRUMHEAT_KERNEL_THREADS; the tests' beds are
+    below the 2000 particles per thread the build asks for) lists the pairs of one thread and
+    of the JAX build, slot for slot, with the same sources. Along the periodic axis the
+    slice of 0.12 m has six cells (the minimum image only for the cells that wrap), that of
+    0.08 m four (the minimum image for every pair)."""
+    rng = np.random.default_rng(11 + dim)
+    n = 2500
+    lo, hi = np.full(dim, -0.15), np.full(dim, 0.15)
+    if periodic:
+        lo[-1], hi[-1] = 0.0, periodic
+    pos = jnp.asarray(rng.uniform(lo, hi, (n, dim)))
+    jx, cp = _setups(dim, periodic, lo, hi, pair_order=pair_order)
+    if periodic:
+        assert cp.grid.cells[-1] == {0.12: 6, 0.08: 4}[periodic]
+    nbrs = jx.allocate(pos, min_cell_capacity=40)
+    moved = pos + jnp.asarray(rng.normal(0.0, 0.003, (n, dim)))
+    if periodic:
+        moved = moved.at[:, -1].set(jnp.mod(moved[:, -1], periodic))
+    a, sa = jax.jit(jx.rebuild_with_sources)(moved, nbrs)
+    assert int(jnp.sum(a.idx[0] < n)) > 300
+    for threads in ("1", "2", "3"):
+        monkeypatch.setenv("DRUMHEAT_KERNEL_THREADS", threads)
+        b, sb = jax.jit(cp.rebuild_with_sources)(moved, nbrs)
+        np.testing.assert_array_equal(np.asarray(a.idx), np.asarray(b.idx))
+        np.testing.assert_array_equal(np.asarray(sa), np.asarray(sb))
+        assert int(a.error.code) == int(b.error.code) == 0
+
+
 def test_overflows_are_flagged_alike():
     """A crowded cell and too many pairs: the same flags; the pairs written are genuine."""
     rng = np.random.default_rng(4)

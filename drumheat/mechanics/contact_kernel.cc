@@ -154,6 +154,18 @@
 // (input 18 of Contacts: the chunks are cut as there); attributes dt, kw; outputs 0 the heat of
 // each particle (N) f64, 1 the walls' and all contacts' (2) f64, J.
 //
+// The coupled heat's contact conduction (CountConduction; cpu_kernel.count_conduction, for
+// drumheat.thermal.contact.ContactConduction in the coupled DEM's thermal step): the heat flow
+// into each particle Q_i = sum over the pair slots of g (c dt / h) (T_j - T_i), added at i and
+// taken from j, g = alpha pi min(r_i, r_j)^2 of law 0 above (`conductance`, r = d / 2), c the
+// slot's count of the DEM steps of length dt it conducted during the thermal step h (output 20
+// summed over the thermal step's runs); slots with c = 0 add 0 and those with a padding index
+// (>= N) nothing. One pass over the slots in their order, on the calling thread (split in
+// the contact pass's chunks on two threads it took longer: XLA runs the thermal step's other
+// work beside it). Inputs: 0 temperatures (N) f64, 1 diameters (N) f64, 2 alpha (1) f64, 3
+// pairs (2, M) s32 (the neighbour list itself: its rows as two arrays were copies), 4 counts
+// (M) s32; attributes dt, h; output 0 Q (N) f64, W.
+//
 // Cell order (input 18): the loop reads both partners' data for every listed pair, so where the
 // particles' numbering has no relation to their places (a bed that has mixed for a while, see
 // docs/performance.md) nearly every pair misses the cache twice. The neighbour build then lists
@@ -183,11 +195,12 @@
 // the pairs and ran 15-18 % longer than the second); a pair's chunk does not depend on the
 // list's capacity, but on its listed pairs (its skin, and where it was built): the sums of
 // the chunks meet at other particles, round-off. Both passes (Contacts and ContactHeat) cut their
-// chunks so. The passes of a call are made by one Team: its C - 1 pool threads stay with the
-// call, waiting between the passes, and the calling thread takes any chunk no pool thread has
-// started (handed each pass anew, the pool thread began the contact pass some 40 us after it
-// was handed over, on average, and the pass that adds the sums mostly only after the calling
-// thread had made both chunks). Chunk c accumulates its forces (and the second pass its heat)
+// chunks so. The passes of a call are made by one Team (kernel_team.h, which the neighbour
+// build's search uses too): its C - 1 pool threads stay with the call, waiting between the
+// passes, and the calling thread takes any chunk no pool thread has started (handed each pass
+// anew, the pool thread began the contact pass some 40 us after it was handed over, on
+// average, and the pass that adds the sums mostly only after the calling thread had made both
+// chunks). Chunk c accumulates its forces (and the second pass its heat)
 // in its own buffer and the buffers are summed in chunk order, so the result depends on C and
 // the list (round-off) and on nothing else, whichever thread ran which chunk.
 //
@@ -218,10 +231,13 @@
 #include <type_traits>
 #include <vector>
 #include "kernel_math.h"
+#include "kernel_team.h"
 #include "xla/ffi/api/ffi.h"
 namespace ffi = xla::ffi;
 
 namespace {
+
+using drumheat::Team;
 
 constexpr int64_t MIN_CHUNK = 8000;  // listed pairs per chunk at least (below: one thread)
 constexpr double kPi = 3.14159265358979323846;
@@ -705,98 +721,6 @@ Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int
   }
   return ch;
 }
-
-// The threads of one call's passes (see the header, Threads): team.each(run) runs run(c) for
-// the chunks c = 0 .. size() - 1 and returns when all are done. The team's pool threads
-// (size() - 1 of them, each a task given to the pool when the team is made) stay with the
-// team until it is destroyed, waiting between the passes, so that a pass does not wait for a
-// pool thread to wake up; the calling thread takes any chunk no pool thread has started, so
-// the passes get done whether the pool's threads come or not.
-class Team {
- public:
-  Team(ffi::ThreadPool& pool, int64_t nc) : st_(std::make_shared<State>()) {
-    st_->nc = static_cast<int>(nc);
-    for (int64_t t = 1; t < nc; ++t) {
-      std::shared_ptr<State> st = st_;
-      pool.Schedule([st] { member(*st); });
-    }
-  }
-  ~Team() {  // no pool thread touches the caller's frame after this
-    st_->closed.store(true, std::memory_order_release);
-    while (st_->active.load(std::memory_order_acquire) != 0) std::this_thread::yield();
-  }
-  Team(const Team&) = delete;
-  Team& operator=(const Team&) = delete;
-  int64_t size() const { return st_->nc; }
-
-  void each(const std::function<void(int)>& run) {
-    State& s = *st_;
-    if (s.nc == 1) { run(0); return; }
-    s.run = &run;
-    s.done.store(0, std::memory_order_relaxed);
-    ++pass_;
-    s.word.store(static_cast<uint64_t>(pass_) << 32, std::memory_order_release);
-    claim(s);
-    for (int spins = 0; s.done.load(std::memory_order_acquire) < s.nc;) wait(spins);
-  }
-
- private:
-  // The pass's number (the high 32 bits) and its next unclaimed chunk (the low 32) in one
-  // word: a chunk is claimed by one compare-and-swap of both, so a thread that read the word
-  // of a pass before the next one began can claim nothing of either; the number of chunks
-  // is the same for every pass (a claim past it runs nothing). A pool thread registers in
-  // `active` before it looks at `closed`, and the caller sets `closed` before it waits for
-  // `active` to drop to zero.
-  static constexpr uint64_t kIndex = 0xffffffffu;
-  struct State {
-    std::atomic<uint64_t> word{kIndex};  // (no pass yet: nothing to claim)
-    std::atomic<int> done{0};  // the chunks of the pass finished
-    std::atomic<int> active{0};
-    std::atomic<bool> closed{false};
-    int nc = 1;
-    const std::function<void(int)>* run = nullptr;  // the pass's (set before its word)
-  };
-
-  // claims and runs the chunks of the word's pass that are left
-  static void claim(State& s) {
-    uint64_t w = s.word.load(std::memory_order_acquire);
-    while ((w & kIndex) < static_cast<uint64_t>(s.nc)) {
-      if (s.word.compare_exchange_weak(w, w + 1, std::memory_order_acq_rel,
-                                       std::memory_order_acquire)) {
-        (*s.run)(static_cast<int>(w & kIndex));
-        s.done.fetch_add(1, std::memory_order_release);
-        w = s.word.load(std::memory_order_acquire);
-      }
-    }
-  }
-  // a pause in a wait (`spins` the pauses so far, counted up to the limit): the processor's
-  // spin hint at first, then the thread's time slice given up
-  static void wait(int& spins) {
-    if (spins < 4096) {
-      ++spins;
-#if defined(__x86_64__) || defined(__i386__)
-      __builtin_ia32_pause();
-#endif
-    } else {
-      std::this_thread::yield();
-    }
-  }
-  static void member(State& s) {
-    s.active.fetch_add(1, std::memory_order_acq_rel);
-    for (int spins = 0; !s.closed.load(std::memory_order_acquire);) {
-      if ((s.word.load(std::memory_order_acquire) & kIndex) < static_cast<uint64_t>(s.nc)) {
-        claim(s);
-        spins = 0;
-      } else {
-        wait(spins);
-      }
-    }
-    s.active.fetch_sub(1, std::memory_order_acq_rel);
-  }
-
-  std::shared_ptr<State> st_;
-  uint32_t pass_ = 0;
-};
 
 // the buffers of one call, untyped (their dtype is checked in ContactsImpl)
 struct Call {
@@ -1842,3 +1766,45 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(
         .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::Buffer<ffi::S32>>()
         .Attr<double>("dt").Attr<double>("kw")
         .Ret<ffi::Buffer<ffi::F64>>().Ret<ffi::Buffer<ffi::F64>>());
+
+// The coupled heat's contact conduction (CountConduction; see the header).
+static ffi::Error CountConductionImpl(ffi::Buffer<ffi::F64> temp, ffi::Buffer<ffi::F64> diam,
+                                      ffi::Buffer<ffi::F64> alpha, ffi::Buffer<ffi::S32> pairs,
+                                      ffi::Buffer<ffi::S32> counts, double dt, double h,
+                                      ffi::ResultBuffer<ffi::F64> heat) {
+  const int64_t n = static_cast<int64_t>(temp.element_count());
+  const int64_t m = static_cast<int64_t>(counts.element_count());
+  const auto pd = pairs.dimensions();
+  if (static_cast<int64_t>(diam.element_count()) != n || alpha.element_count() != 1 ||
+      pd.size() != 2 || pd[0] != 2 || pd[1] != m ||
+      static_cast<int64_t>(heat->element_count()) != n)
+    return ffi::Error::InvalidArgument("drumheat_count_conduction: buffers of wrong size");
+  const double* T = temp.typed_data();
+  const double* d = diam.typed_data();
+  const double a = alpha.typed_data()[0];
+  const int32_t* I = pairs.typed_data();
+  const int32_t* J = I + m;
+  const int32_t* C = counts.typed_data();
+  double* Q = heat->typed_data();
+  std::fill(Q, Q + n, 0.0);
+  for (int64_t k = 0; k < m; ++k) {
+    // every listed slot, its count 0 or not: a test of the count mispredicts where the
+    // conducting slots alternate with the others (about half of them in a turning bed), and
+    // a count 0 adds 0, as the JAX sum's slot does
+    const int64_t i = I[k], j = J[k];
+    if (i < 0 || j < 0 || i >= n || j >= n) continue;  // padding (at the list's end)
+    const double f = conductance(0, a, 0.5 * d[i], 0.5 * d[j], 0.0) * ((C[k] * dt) / h) *
+                     (T[j] - T[i]);
+    Q[i] += f;
+    Q[j] -= f;
+  }
+  return ffi::Error::Success();
+}
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(
+    CountConduction, CountConductionImpl,
+    ffi::Ffi::Bind()
+        .Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::Buffer<ffi::F64>>().Arg<ffi::Buffer<ffi::F64>>()
+        .Arg<ffi::Buffer<ffi::S32>>().Arg<ffi::Buffer<ffi::S32>>()
+        .Attr<double>("dt").Attr<double>("h")
+        .Ret<ffi::Buffer<ffi::F64>>());

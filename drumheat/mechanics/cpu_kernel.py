@@ -28,9 +28,12 @@ docs/performance.md (``scripts/bench_cpu_pair_kernel.py`` kernel against kernel,
 ``scripts/bench_vs_liggghts.py`` the whole step against LIGGGHTS).
 
 The same library holds the neighbour rebuild of such runs (``neighbor_kernel.cc``,
-:func:`neighbor_pairs`): the pairs of the XLA cell list in its order (canonical, or grouped in
-the cell order) and, for carrying the springs and other per-pair data, the old slot of each
-pair; :func:`take_pair_data_in_place` then carries each per-pair array in its own buffer.
+:func:`neighbor_pairs`, its search on the same threads): the pairs of the XLA cell list in its
+order (canonical, or grouped in the cell order) and, for carrying the springs and other
+per-pair data, the old slot of each pair; :func:`take_pair_data_in_place` then carries each
+per-pair array in its own buffer. And the coupled heat's contact conduction at each thermal
+step (:func:`count_conduction`, for :class:`drumheat.thermal.contact.ContactConduction` on the
+contact times the loop counted), which in XLA took eight passes over the pair slots.
 
 Scope: 2D (monolayer: x-y, spin about z) and 3D, float32 and float64 mechanics, any number of
 materials (per-type contact tables), rolling resistance, walls, pair conduction, friction
@@ -75,19 +78,21 @@ import jax.numpy as jnp
 import numpy as np
 from drumheat.environment import cache_dir_setting
 
-__all__ = ["TARGET", "HEAT_TARGET", "NEIGHBOR_TARGET", "TAKE_TARGET", "available",
-           "check_supported", "contacts", "contact_heat", "kernel_params", "load",
+__all__ = ["TARGET", "HEAT_TARGET", "NEIGHBOR_TARGET", "TAKE_TARGET", "COUNT_CONDUCTION_TARGET",
+           "available", "check_supported", "contacts", "contact_heat", "count_conduction",
+           "kernel_params", "load",
            "neighbor_pairs", "take_pair_data_in_place", "unsupported_reasons"]
 
 TARGET = "drumheat_contacts"
 HEAT_TARGET = "drumheat_contact_heat"  # the friction heat's second pass
 NEIGHBOR_TARGET = "drumheat_neighbors"
 TAKE_TARGET = "drumheat_take_pairs"  # per-pair data carried to a rebuilt list in place
+COUNT_CONDUCTION_TARGET = "drumheat_count_conduction"  # the coupled heat's contact conduction
 SOURCE = Path(__file__).with_name("contact_kernel.cc")
 #: the sources compiled into the one library: the contact loop and the neighbour rebuild
 SOURCES = (SOURCE, Path(__file__).with_name("neighbor_kernel.cc"))
-#: the header both sources include (part of the library's cache key)
-HEADERS = (Path(__file__).with_name("kernel_math.h"),)
+#: the headers both sources include (part of the library's cache key)
+HEADERS = (Path(__file__).with_name("kernel_math.h"), Path(__file__).with_name("kernel_team.h"))
 #: compiler flags. None changes a number: -ffp-contract=off keeps a * b + c two roundings in the
 #: AVX2 / AVX-512 versions of the vector loops (contact_kernel.cc), which have fused
 #: multiply-adds, so that every version gives the numbers of the baseline x86-64 build;
@@ -206,6 +211,8 @@ def _probe() -> tuple[bool, str]:
                                     platform="cpu")
         jax.ffi.register_ffi_target(TAKE_TARGET, jax.ffi.pycapsule(lib.TakePairs),
                                     platform="cpu")
+        jax.ffi.register_ffi_target(COUNT_CONDUCTION_TARGET,
+                                    jax.ffi.pycapsule(lib.CountConduction), platform="cpu")
     except (OSError, AttributeError) as e:
         return False, f"the compiled C++ contact kernel {out} cannot be loaded ({e})"
     _REGISTERED = str(out)
@@ -527,6 +534,41 @@ def contact_heat(vel, omega, idx, pair_rows, wall_rows, wall_velocity, wall_omeg
         pair_rows, wall_rows, c(wall_velocity), c(wall_omega), k,
         _order_arg(order),
         dt=np.float64(dt), kw=np.float64(wall_conductivity))
+
+
+def count_conduction(T, diameter, alpha, idx, counts, dt: float, h: float):
+    """The contact conduction of a coupled thermal step in one C++ pass (``CountConduction``
+    of ``contact_kernel.cc``): the heat flow into each particle, W, (N,) float64,
+
+        Q_i = sum over the slots k of g_k (c_k dt / h) (T_j - T_i), added at i, taken from j,
+
+    with ``g = alpha pi min(r_i, r_j)^2`` (the ``"projected"`` law of
+    :mod:`drumheat.mechanics.conduction`, which is
+    :class:`drumheat.thermal.contact.ContactConduction`'s ``alpha_pp A_p`` with
+    ``A_p = pi d^2 / 4`` of the smaller sphere, weigler-thermal-dem.md eq. [2.7]) and
+    ``c dt / h`` the slot's contact-time fraction of the thermal step
+    (:attr:`drumheat.thermal.network.ContactNetwork.pair_unit`). The sums take the slots in
+    their order, both ends of a slot at once, where the JAX pair sum adds them block by block:
+    the two differ by round-off.
+
+    Args:
+      T: temperatures (N,), K; diameter: (N,), m; alpha: alpha_pp, W/(m^2 K), a scalar.
+      idx: the slots' particles (2, M), padding index N (where it is a neighbour list's, XLA
+        hands the list itself); counts: (M,) the DEM steps each slot conducted (0: none, as
+        for every padding slot).
+      dt: the DEM step, s; h: the thermal step, s.
+
+    Not differentiable by itself: :func:`drumheat.thermal.network.native_pair_sum` gives it
+    the derivatives of the JAX sum.
+    """
+    load()
+    f64 = jnp.float64
+    T = jnp.asarray(T, f64)
+    out = jax.ShapeDtypeStruct(T.shape, f64)
+    return jax.ffi.ffi_call(COUNT_CONDUCTION_TARGET, out, vmap_method="sequential")(
+        T, jnp.asarray(diameter, f64), jnp.reshape(jnp.asarray(alpha, f64), (1,)),
+        jnp.asarray(idx, jnp.int32), jnp.asarray(counts, jnp.int32),
+        dt=np.float64(dt), h=np.float64(h))
 
 
 def neighbor_pairs(position, old_idx, capacity: int, cells, cell_size, cutoff: float,

@@ -36,13 +36,17 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <limits>
 #include <vector>
 #include "kernel_math.h"
+#include "kernel_team.h"
 #include "xla/ffi/api/ffi.h"
 namespace ffi = xla::ffi;
 
 namespace {
+
+using drumheat::Team;
 
 // floor(x / size) as XLA converts it to s32 (saturating, NaN -> 0), then clipped or wrapped
 template <typename S>
@@ -83,11 +87,64 @@ struct Grid {
   int64_t cap;
 };
 
-// the pairs in canonical order into out (2, M), padded with N; the particles in the order of
-// their cells into cell_order (N)
+// The search of build for the particles [lo, hi): their pairs (i, j), i < j, interleaved in
+// `pairs`, i ascending, j ascending for each i. A function of its own, not the team's lambda:
+// with the lambda's captured references the compiler reloaded them in the inner loop.
 template <typename S, int D>
-void build(const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m, int64_t* total,
-           int64_t* fullest, int32_t* cell_order) {
+void search(const S* x, int64_t lo, int64_t hi, const int64_t* coord, const int64_t* count,
+            const int32_t* order, const int64_t* rank, const int64_t* shifts, int64_t ns,
+            const int64_t* cells, int64_t cap, bool few, bool periodic, S cut2, S L,
+            std::vector<int32_t>& pairs) {
+  std::vector<int32_t> cand;
+  pairs.reserve(static_cast<size_t>(12 * (hi - lo)));  // ~6 pairs per particle
+  for (int64_t i = lo; i < hi; ++i) {
+    if (rank[i] >= cap) continue;  // not seen as the smaller partner (cell overflow)
+    cand.clear();
+    for (int64_t q = 0; q < ns; ++q) {
+      int64_t k = 0, mult = 1;
+      bool wrapped = few;
+      for (int a = 0; a < D; ++a) {
+        // the neighbour cell's coordinate modulo the cells of the axis: the cell's lies in
+        // [0, cells) and the offset in {-1, 0, 1}, so one period at most (an integer division
+        // per axis and offset took most of the build's time)
+        int64_t c = coord[3*i + a] + shifts[3*q + a];
+        if (a == D - 1) wrapped = wrapped || c < 0 || c >= cells[a];
+        c = c < 0 ? c + cells[a] : (c >= cells[a] ? c - cells[a] : c);
+        k += c * mult;
+        mult *= cells[a];
+      }
+      const bool image = D == 3 && periodic && wrapped;
+      for (int64_t u = count[k]; u < count[k + 1]; ++u) {
+        const int32_t j = order[u];
+        if (j <= i) continue;
+        S d[D];
+        for (int a = 0; a < D; ++a) d[a] = x[D*j + a] - x[D*i + a];
+        if (image) d[D - 1] = d[D - 1] - L * drumheat::round_to_even(d[D - 1] / L);
+        S r2 = d[0]*d[0] + d[1]*d[1];
+        if (D == 3) r2 = r2 + d[2]*d[2];
+        if (r2 < cut2) cand.push_back(j);
+      }
+    }
+    std::sort(cand.begin(), cand.end());
+    for (const int32_t j : cand) {
+      pairs.push_back(static_cast<int32_t>(i));
+      pairs.push_back(j);
+    }
+  }
+}
+
+// particles per thread of the search at least (below: fewer threads)
+constexpr int64_t MIN_PARTICLES = 2000;
+
+// the pairs in canonical order into out (2, M), padded with N; the particles in the order of
+// their cells into cell_order (N). The search for each particle's partners runs on the team's
+// threads (kernel_team.h; C = the pool's threads, at most one per MIN_PARTICLES particles,
+// DRUMHEAT_KERNEL_THREADS sets C), part c taking the particles [n c / C, n (c + 1) / C) into
+// pairs of its own, which are then written one part after the other: the list of one
+// thread, slot for slot.
+template <typename S, int D>
+void build(ffi::ThreadPool& pool, const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m,
+           int64_t* total, int64_t* fullest, int32_t* cell_order) {
   const int64_t nc = g.cells[0] * g.cells[1] * g.cells[2];
   const bool periodic = g.L > 0;
   const S size[3] = {S(g.size[0]), S(g.size[1]), S(g.size[2])};
@@ -125,39 +182,25 @@ void build(const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m, int64_
         if (ok) shifts.insert(shifts.end(), s, s + 3);
       }
   const int64_t ns = static_cast<int64_t>(shifts.size() / 3);
-  std::vector<int32_t> cand;
+  // the minimum image along the periodic axis changes nothing where the neighbour cell did
+  // not wrap and the axis has five cells or more: then |dz| < 2 cells <= 0.4 L, dz / L rounds
+  // to 0 and dz - L 0 is dz, bit for bit; the rounding took a fifth of the build's time
+  const bool few = g.cells[D - 1] < 5;
+  int64_t nt = pool.num_threads();
+  if (nt > n / MIN_PARTICLES) nt = n / MIN_PARTICLES;
+  if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nt = std::atoi(e);  // exactly
+  if (nt < 1) nt = 1;
+  std::vector<std::vector<int32_t>> found(nt);  // each part's pairs, (i, j) interleaved
+  Team team(pool, nt);
+  team.each([&](int part) {
+    search<S, D>(x, n * part / nt, n * (part + 1) / nt, coord.data(), count.data(), order.data(),
+                 rank.data(), shifts.data(), ns, g.cells, g.cap, few, periodic, cut2, L,
+                 found[part]);
+  });
   int64_t t = 0;
-  for (int64_t i = 0; i < n; ++i) {
-    if (rank[i] >= g.cap) continue;  // not seen as the smaller partner (cell overflow)
-    cand.clear();
-    for (int64_t q = 0; q < ns; ++q) {
-      int64_t k = 0, mult = 1;
-      for (int a = 0; a < D; ++a) {
-        // the neighbour cell's coordinate modulo the cells of the axis: the cell's lies in
-        // [0, cells) and the offset in {-1, 0, 1}, so one period at most (an integer division
-        // per axis and offset took most of the build's time)
-        int64_t c = coord[3*i + a] + shifts[3*q + a];
-        c = c < 0 ? c + g.cells[a] : (c >= g.cells[a] ? c - g.cells[a] : c);
-        k += c * mult;
-        mult *= g.cells[a];
-      }
-      for (int64_t u = count[k]; u < count[k + 1]; ++u) {
-        const int32_t j = order[u];
-        if (j <= i) continue;
-        S d[D];
-        for (int a = 0; a < D; ++a) d[a] = x[D*j + a] - x[D*i + a];
-        if (D == 3 && periodic) d[D - 1] = d[D - 1] - L * drumheat::round_to_even(d[D - 1] / L);
-        S r2 = d[0]*d[0] + d[1]*d[1];
-        if (D == 3) r2 = r2 + d[2]*d[2];
-        if (r2 < cut2) cand.push_back(j);
-      }
-    }
-    std::sort(cand.begin(), cand.end());
-    for (const int32_t j : cand) {
-      if (t < m) { out[t] = static_cast<int32_t>(i); out[m + t] = j; }
-      ++t;
-    }
-  }
+  for (const std::vector<int32_t>& pairs : found)
+    for (size_t u = 0; u < pairs.size(); u += 2, ++t)
+      if (t < m) { out[t] = pairs[u]; out[m + t] = pairs[u + 1]; }
   for (int64_t k = t; k < m; ++k) out[k] = out[m + k] = static_cast<int32_t>(n);  // padding
   *total = t;
   std::copy(order.begin(), order.end(), cell_order);
@@ -233,7 +276,7 @@ void sources(const int32_t* old, int64_t mo, const int32_t* nw, int64_t m, int64
 
 }  // namespace
 
-static ffi::Error NeighborsImpl(ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, int64_t n0,
+static ffi::Error NeighborsImpl(ffi::ThreadPool pool, ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, int64_t n0,
                                 int64_t n1, int64_t n2, double s0, double s1, double s2,
                                 double cut2, double L, int64_t cap, int32_t ranked,
                                 ffi::ResultBuffer<ffi::S32> pairs,
@@ -264,11 +307,11 @@ static ffi::Error NeighborsImpl(ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, i
   }
   const void* xp = pos.untyped_data();
   if (pd[1] == 3) {
-    if (f64) build<double, 3>(static_cast<const double*>(xp), n, g, out, m, &t, &f, co);
-    else build<float, 3>(static_cast<const float*>(xp), n, g, out, m, &t, &f, co);
+    if (f64) build<double, 3>(pool, static_cast<const double*>(xp), n, g, out, m, &t, &f, co);
+    else build<float, 3>(pool, static_cast<const float*>(xp), n, g, out, m, &t, &f, co);
   } else {
-    if (f64) build<double, 2>(static_cast<const double*>(xp), n, g, out, m, &t, &f, co);
-    else build<float, 2>(static_cast<const float*>(xp), n, g, out, m, &t, &f, co);
+    if (f64) build<double, 2>(pool, static_cast<const double*>(xp), n, g, out, m, &t, &f, co);
+    else build<float, 2>(pool, static_cast<const float*>(xp), n, g, out, m, &t, &f, co);
   }
   // the sources of the canonical list (the old one's groups searched by i), then both regrouped
   sources(op, mo, out, m, n, src->typed_data());
@@ -283,6 +326,7 @@ static ffi::Error NeighborsImpl(ffi::AnyBuffer pos, ffi::Buffer<ffi::S32> old, i
 XLA_FFI_DEFINE_HANDLER_SYMBOL(
     Neighbors, NeighborsImpl,
     ffi::Ffi::Bind()
+        .Ctx<ffi::ThreadPool>()
         .Arg<ffi::AnyBuffer>().Arg<ffi::Buffer<ffi::S32>>()
         .Attr<int64_t>("n0").Attr<int64_t>("n1").Attr<int64_t>("n2")
         .Attr<double>("s0").Attr<double>("s1").Attr<double>("s2")

@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.mechanics.cpu_kernel import count_conduction
 from drumheat.mechanics.dissipation import SOURCES
 from drumheat.mechanics.integrator import CountingUpdate, PairCarried
 from drumheat.thermal.model import ThermalModel
@@ -141,7 +142,7 @@ class CoupledHeat(PairCarried):
 
 
 def thermal_network(idx, n, pair_steps, wall_time, wall_heated, n_walls, h, dt,
-                    wall_ids=None) -> ContactNetwork:
+                    wall_ids=None, pair_kernel: str = "jax") -> ContactNetwork:
     """Contact network of one thermal step from accumulated contact times.
 
     Parameters
@@ -162,6 +163,12 @@ def thermal_network(idx, n, pair_steps, wall_time, wall_heated, n_walls, h, dt,
     wall_ids : int array (n_walls,), optional
         Wall id (index into the wall effect's temperatures) of each primitive; default 0 for
         all (a drum whose only heated wall is the shell).
+    pair_kernel : {"jax", "cpu"}
+        The DEM's contact backend: with ``"cpu"`` the contact conduction sums over the pairs
+        in C++ (:attr:`ContactNetwork.native_conduction`,
+        :func:`drumheat.mechanics.cpu_kernel.count_conduction`: the same sum to round-off, at
+        a fraction of XLA:CPU's passes over the slots, docs/performance.md); the other
+        effects stay in JAX.
     """
     # the padding slots keep their index n (ContactNetwork: dropped by the effects' scatters);
     # pointed at particle 0 instead, each would add its zero into particle 0, and a GPU
@@ -171,12 +178,23 @@ def thermal_network(idx, n, pair_steps, wall_time, wall_heated, n_walls, h, dt,
     wk = jnp.tile(jnp.arange(n_walls), n)
     w_wall = wall_time / h * wall_heated[wk]
     wid = jnp.zeros_like(wp) if wall_ids is None else jnp.asarray(wall_ids, wp.dtype)[wk]
-    return ContactNetwork(i, j, pair_steps, wp, wid, w_wall, pair_unit=(dt, h))
+    native = _cpu_conduction if pair_kernel == "cpu" else None
+    return ContactNetwork(i, j, pair_steps, wp, wid, w_wall, pair_unit=(dt, h),
+                          native_conduction=native)
+
+
+def _cpu_conduction(T, diameter, alpha, net: ContactNetwork):
+    """:attr:`ContactNetwork.native_conduction` of the C++ contact backend."""
+    dt, h = net.pair_unit
+    # the rows stacked again: of a neighbour list's rows XLA hands the list itself
+    ij = jnp.stack([net.pair_i, net.pair_j])
+    return count_conduction(T, diameter, alpha, ij, net.pair_weight, dt, h)
 
 
 def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, substeps: int,
                         dt: float, batch_axis: str | None = None, wall_ids=None,
-                        per_wall: bool = False, friction: bool = False):
+                        per_wall: bool = False, friction: bool = False,
+                        pair_kernel: str = "jax"):
     """``extra_update`` for :func:`drumheat.mechanics.make_dem`: coupled heat transfer.
 
     The ``extra`` state is a :class:`CoupledHeat` (:func:`initial_extra`); the thermal
@@ -196,6 +214,9 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     state's :class:`FrictionBook` gathers each step's heat, and the next thermal step adds it
     to the temperatures and to the account ``Q["friction"]`` (and the walls' share and the
     sources to their totals), so that all of them are booked at the same instants.
+
+    ``pair_kernel``: the DEM's contact backend (``make_dem(pair_kernel=...)``); ``"cpu"`` sums
+    the contact conduction of the thermal step in C++ too (:func:`thermal_network`).
 
     Returns a :class:`ThermalUpdate` (a :class:`~drumheat.mechanics.CountingUpdate`: the DEM
     may hand it the counts of the steps up to the next thermal step at once), or with
@@ -227,7 +248,7 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     def thermal_step(extra, ops):
         idx = ops[0] if drum_wall else ops
         net = thermal_network(idx, n, extra.pair.time, extra.wall_time * dt, heated,
-                              n_walls, h, dt, wall_ids)
+                              n_walls, h, dt, wall_ids, pair_kernel)
         m = model_of(extra)
         if drum_wall:
             q, ext, out = drum_wall_step(m, extra, net, ops[1], ops[2], h, n_walls)

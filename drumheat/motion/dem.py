@@ -273,17 +273,18 @@ class DEMBed(DEMMotion):
         :func:`drumheat.mechanics.make_dem` and :func:`~drumheat.motion.coupling.make_thermal_update`.
         """
         friction = assemble.friction_heat(self.scene)
+        backend = self.contact_backend(batch_axis is not None).backend
         update = make_thermal_update(model, self.n, len(self.walls), self.wall_heated,
                                      self.substeps, self.dt, batch_axis=batch_axis,
-                                     wall_ids=self.wall_ids, friction=friction is not None)
+                                     wall_ids=self.wall_ids, friction=friction is not None,
+                                     pair_kernel=backend)
         return make_dem(self.mech, self.walls, self.params, dim=self.dim, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.periodic,
                         skin=self.scene.dem.skin, dtype=self.dtype,
                         position_dtype=self.position_dtype, extra_update=update,
                         chunk=self.steps_per_record or self.steps_per_output,
                         batch_axis=batch_axis, conduction_gap=self.setup.conduction_gap,
-                        pair_kernel=self.contact_backend(batch_axis is not None).backend,
-                        friction_heat=friction,
+                        pair_kernel=backend, friction_heat=friction,
                         contact_details=False)  # the coupled heat reads pair_conducts only
 
     def packing_positions(self) -> np.ndarray:

@@ -290,15 +290,16 @@ class MovingBed(DEMMotion):
 
     def make_dem(self, model):
         """The DEM system with the coupled thermal update and the recycling boundary."""
+        backend = self.contact_backend().backend
         update = make_thermal_update(model, self.n, self.n_walls, self.wall_heated,
-                                     self.substeps, self.dt, per_wall=True)
+                                     self.substeps, self.dt, per_wall=True, pair_kernel=backend)
         return make_dem(self.mech, self.walls, self.params, dim=3, dt=self.dt,
                         gravity=self.gravity, periodic_length=self.hopper.depth,
                         bounds=self.bounds, skin=self.scene.dem.skin, dtype=self.dtype,
                         position_dtype=self.position_dtype,
                         extra_update=update, boundary_update=self.make_boundary(),
                         chunk=self.steps_per_output, conduction_gap=self.setup.conduction_gap,
-                        pair_kernel=self.contact_backend().backend,
+                        pair_kernel=backend,
                         contact_details=False)  # the coupled heat reads pair_conducts only
 
     # -- the loop -------------------------------------------------------------------------------

@@ -10,13 +10,19 @@ from jax import Array
 from drumheat.models import schluender
 from drumheat.models.contact_conductance import projected_area
 from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
-from drumheat.thermal.network import ContactNetwork
+from drumheat.thermal.network import ContactNetwork, native_pair_sum
 from drumheat.thermal.particles import ThermalParticles
 
 
 def pair_area(particles: ThermalParticles, i: Array, j: Array) -> Array:
     """:func:`projected_area` of the pairs (i, j) of a bed."""
     return projected_area(particles.diameter[i], particles.diameter[j])
+
+
+def _pair_conductance(alpha, diameter, i, j, w) -> Array:
+    """``alpha_pp A_p w`` of the pair slots (i, j) with contact-time fractions w, W/K
+    (weigler-thermal-dem.md eq. [2.7])."""
+    return alpha * projected_area(diameter[i], diameter[j]) * w
 
 
 def schluender_coefficients(ctx: EffectContext):
@@ -48,23 +54,30 @@ class ContactConduction(AbstractEffect):
 
     def conductance(self, particles: ThermalParticles, net: ContactNetwork) -> Array:
         """Conductance of every pair slot, W/K (0 for unused slots)."""
-        return self._conductance(particles, net.pair_i, net.pair_j,
+        return _pair_conductance(self.alpha, particles.diameter, net.pair_i, net.pair_j,
                                  net.pair_weights(particles.diameter.shape[0]))
 
-    def _conductance(self, particles: ThermalParticles, i, j, w) -> Array:
-        return self.alpha * pair_area(particles, i, j) * w
-
     def heat_flow(self, T: Array, particles: ThermalParticles, net: ContactNetwork) -> Array:
-        """Heat flow into each particle, W, shape (N,)."""
-        return net.pair_sum(lambda i, j, w: self._conductance(particles, i, j, w) * (T[j] - T[i]),
-                            jnp.zeros_like(T))
+        """Heat flow into each particle, W, shape (N,): in JAX, or where the network has one
+        in native code (:attr:`ContactNetwork.native_conduction`, the same sum; its
+        derivatives those of the JAX sum)."""
+        def in_jax(T, diameter, alpha):
+            return net.pair_sum(
+                lambda i, j, w: _pair_conductance(alpha, diameter, i, j, w) * (T[j] - T[i]),
+                jnp.zeros_like(T))
+
+        args = (T, particles.diameter, self.alpha)
+        if net.native_conduction is None or net.pair_unit is None:
+            return in_jax(*args)
+        return native_pair_sum(lambda *a: net.native_conduction(*a, net), in_jax, *args)
 
     def conductance_sum(self, particles: ThermalParticles, net: ContactNetwork,
                         T: Array | None = None) -> Array:
         """Sum of the conductances at each particle, W/K (for the stability limit [2.2])."""
         n = particles.diameter.shape[0]
-        return net.pair_sum(lambda i, j, w: self._conductance(particles, i, j, w),
-                            jnp.zeros(n), sign=1.0)
+        return net.pair_sum(
+            lambda i, j, w: _pair_conductance(self.alpha, particles.diameter, i, j, w),
+            jnp.zeros(n), sign=1.0)
 
     @classmethod
     def from_table(cls, table: TableValues, ctx: EffectContext) -> "ContactConduction":

@@ -11,6 +11,8 @@ resting bed; between 0 and 1 when the thermal step spans several mechanical step
 
 from __future__ import annotations
 
+from typing import Callable
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -56,6 +58,13 @@ class ContactNetwork(eqx.Module):
         fractions one block of slots at a time, so that no per-slot float array of the whole
         list exists beside the counts. Unused slots (index N) weigh 0 in both whatever they
         count (:attr:`n_pairs`, which does not know N, needs them to count 0).
+    native_conduction : callable or None
+        ``fn(T, diameter, alpha, net) -> (N,)``: the pair sum of
+        :class:`drumheat.thermal.contact.ContactConduction` over this network in native code,
+        for a network with ``pair_unit`` (the coupled DEM's on the C++ contact backend sets
+        it: :func:`drumheat.motion.coupling.thermal_network`); the effect gives it the
+        derivatives of its JAX sum (:func:`native_pair_sum`). None: the sum in JAX
+        (:meth:`pair_sum`).
     """
 
     pair_i: Array
@@ -66,6 +75,7 @@ class ContactNetwork(eqx.Module):
     wall_weight: Array
     wall_angle: Array | None = None
     pair_unit: tuple[float, float] | None = eqx.field(static=True, default=None)
+    native_conduction: Callable | None = eqx.field(static=True, default=None)
 
     def weights_of(self, raw: Array, i: Array, n: int) -> Array:
         """The contact-time fractions of slots with ``pair_weight`` values ``raw`` and first
@@ -192,3 +202,22 @@ def find_contacts_2d_drum(position, diameter, drum_diameter, tolerance=0.01,
     wall_tol = tolerance if wall_tolerance is None else wall_tolerance
     wall_particles = np.nonzero(wall_gap <= wall_tol * diameter)[0]
     return pairs, wall_particles
+
+
+def native_pair_sum(native, reference, *args):
+    """``native(*args)``, with the derivatives of ``reference(*args)``.
+
+    ``native`` computes the values of the JAX function ``reference`` in native code, which JAX
+    cannot differentiate (:attr:`ContactNetwork.native_conduction`); wrapped in a
+    ``jax.custom_jvp`` whose tangents are those of ``reference``, ``jax.jvp`` and ``jax.grad``
+    differentiate the JAX sum. Both take the same positional arrays.
+    """
+    @jax.custom_jvp
+    def values(*a):
+        return native(*a)
+
+    @values.defjvp
+    def values_jvp(primals, tangents):
+        return native(*primals), jax.jvp(reference, primals, tangents)[1]
+
+    return values(*args)
