@@ -87,16 +87,31 @@ struct Grid {
   int64_t cap;
 };
 
-// The search of build for the particles [lo, hi): their pairs (i, j), i < j, interleaved in
-// `pairs`, i ascending, j ascending for each i. A function of its own, not the team's lambda:
-// with the lambda's captured references the compiler reloaded them in the inner loop.
-template <typename S, int D>
+// Where the search puts its pairs: straight into the list (2, M), counting those beyond its
+// capacity (the first part's), or into pairs of its own, (i, j) interleaved (the others',
+// written after the first part's when all are done)
+struct IntoList {
+  int32_t* out;
+  int64_t m, t = 0;
+  void add(int32_t i, int32_t j) {
+    if (t < m) { out[t] = i; out[m + t] = j; }
+    ++t;
+  }
+};
+struct Aside {
+  std::vector<int32_t> pairs;
+  void add(int32_t i, int32_t j) { pairs.push_back(i); pairs.push_back(j); }
+};
+
+// The search of build for the particles [lo, hi): their pairs (i, j), i < j, into `sink`, i
+// ascending, j ascending for each i. A function of its own, not the team's lambda: with the
+// lambda's captured references the compiler reloaded them in the inner loop.
+template <typename S, int D, typename Sink>
 void search(const S* x, int64_t lo, int64_t hi, const int64_t* coord, const int64_t* count,
             const int32_t* order, const int64_t* rank, const int64_t* shifts, int64_t ns,
             const int64_t* cells, int64_t cap, bool few, bool periodic, S cut2, S L,
-            std::vector<int32_t>& pairs) {
+            Sink& sink) {
   std::vector<int32_t> cand;
-  pairs.reserve(static_cast<size_t>(12 * (hi - lo)));  // ~6 pairs per particle
   for (int64_t i = lo; i < hi; ++i) {
     if (rank[i] >= cap) continue;  // not seen as the smaller partner (cell overflow)
     cand.clear();
@@ -126,10 +141,7 @@ void search(const S* x, int64_t lo, int64_t hi, const int64_t* coord, const int6
       }
     }
     std::sort(cand.begin(), cand.end());
-    for (const int32_t j : cand) {
-      pairs.push_back(static_cast<int32_t>(i));
-      pairs.push_back(j);
-    }
+    for (const int32_t j : cand) sink.add(static_cast<int32_t>(i), j);
   }
 }
 
@@ -139,9 +151,10 @@ constexpr int64_t MIN_PARTICLES = 2000;
 // the pairs in canonical order into out (2, M), padded with N; the particles in the order of
 // their cells into cell_order (N). The search for each particle's partners runs on the team's
 // threads (kernel_team.h; C = the pool's threads, at most one per MIN_PARTICLES particles,
-// DRUMHEAT_KERNEL_THREADS sets C), part c taking the particles [n c / C, n (c + 1) / C) into
-// pairs of its own, which are then written one part after the other: the list of one
-// thread, slot for slot.
+// DRUMHEAT_KERNEL_THREADS sets C), part c taking the particles [n c / C, n (c + 1) / C), the
+// first into the list, the others into pairs of their own, written after it one part after
+// the other: the list of one thread, slot for slot (the pairs of the parts after the first,
+// 8 bytes each set aside, are the only memory the threads add to the build's).
 template <typename S, int D>
 void build(ffi::ThreadPool& pool, const S* x, int64_t n, const Grid& g, int32_t* out, int64_t m,
            int64_t* total, int64_t* fullest, int32_t* cell_order) {
@@ -190,17 +203,23 @@ void build(ffi::ThreadPool& pool, const S* x, int64_t n, const Grid& g, int32_t*
   if (nt > n / MIN_PARTICLES) nt = n / MIN_PARTICLES;
   if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nt = std::atoi(e);  // exactly
   if (nt < 1) nt = 1;
-  std::vector<std::vector<int32_t>> found(nt);  // each part's pairs, (i, j) interleaved
+  IntoList list{out, m};
+  std::vector<Aside> aside(nt - 1);
   Team team(pool, nt);
   team.each([&](int part) {
-    search<S, D>(x, n * part / nt, n * (part + 1) / nt, coord.data(), count.data(), order.data(),
-                 rank.data(), shifts.data(), ns, g.cells, g.cap, few, periodic, cut2, L,
-                 found[part]);
+    const int64_t lo = n * part / nt, hi = n * (part + 1) / nt;
+    if (part == 0)
+      search<S, D>(x, lo, hi, coord.data(), count.data(), order.data(), rank.data(),
+                   shifts.data(), ns, g.cells, g.cap, few, periodic, cut2, L, list);
+    else
+      search<S, D>(x, lo, hi, coord.data(), count.data(), order.data(), rank.data(),
+                   shifts.data(), ns, g.cells, g.cap, few, periodic, cut2, L, aside[part - 1]);
   });
-  int64_t t = 0;
-  for (const std::vector<int32_t>& pairs : found)
-    for (size_t u = 0; u < pairs.size(); u += 2, ++t)
-      if (t < m) { out[t] = pairs[u]; out[m + t] = pairs[u + 1]; }
+  for (Aside& a : aside) {
+    for (size_t u = 0; u < a.pairs.size(); u += 2) list.add(a.pairs[u], a.pairs[u + 1]);
+    std::vector<int32_t>().swap(a.pairs);
+  }
+  const int64_t t = list.t;
   for (int64_t k = t; k < m; ++k) out[k] = out[m + k] = static_cast<int32_t>(n);  // padding
   *total = t;
   std::copy(order.begin(), order.end(), cell_order);
