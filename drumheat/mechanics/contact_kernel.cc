@@ -162,7 +162,8 @@
 // summed over the thermal step's runs); slots with c = 0 add 0 and those with a padding index
 // (>= N) nothing. One pass over the slots in their order, on the calling thread (split in
 // the contact pass's chunks on two threads it took longer: XLA runs the thermal step's other
-// work beside it). Inputs: 0 temperatures (N) f64, 1 diameters (N) f64, 2 alpha (1) f64, 3
+// work beside it); the fraction as c (dt / h), dt / h computed once, as XLA computes the JAX
+// sum's (c dt) / h. Inputs: 0 temperatures (N) f64, 1 diameters (N) f64, 2 alpha (1) f64, 3
 // pairs (2, M) s32 (the neighbour list itself: its rows as two arrays were copies), 4 counts
 // (M) s32; attributes dt, h; output 0 Q (N) f64, W.
 //
@@ -200,9 +201,9 @@
 // passes, and the calling thread takes any chunk no pool thread has started (handed each pass
 // anew, the pool thread began the contact pass some 40 us after it was handed over, on
 // average, and the pass that adds the sums mostly only after the calling thread had made both
-// chunks). Chunk c accumulates its forces (and the second pass its heat)
-// in its own buffer and the buffers are summed in chunk order, so the result depends on C and
-// the list (round-off) and on nothing else, whichever thread ran which chunk.
+// chunks). Chunk c accumulates its forces (and the second pass its heat) in its own buffer and
+// the buffers are summed in chunk order, so the result depends on C and the list (round-off)
+// and on nothing else, whichever thread ran which chunk.
 //
 // Records: each call first copies the particles' positions and radii, and their velocities,
 // spins, masses and moments of inertia, into one record per particle each (pack_particles; 12
@@ -238,6 +239,7 @@ namespace ffi = xla::ffi;
 namespace {
 
 using drumheat::Team;
+using drumheat::team_size;
 
 constexpr int64_t MIN_CHUNK = 8000;  // listed pairs per chunk at least (below: one thread)
 constexpr double kPi = 3.14159265358979323846;
@@ -706,11 +708,7 @@ Chunks chunks(ffi::ThreadPool& pool, const int32_t* P, int64_t n, int64_t m, int
   int tail = 0;  // whether a pair lies past it (one pass without an early exit: vectorised)
   for (int64_t k = listed; k < m; ++k) tail |= P[k] < n;
   if (tail) listed = m;
-  int64_t nc = pool.num_threads();
-  if (nc > listed / MIN_CHUNK) nc = listed / MIN_CHUNK;
-  if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nc = std::atoi(e);  // exactly
-  if (nc > n) nc = n;
-  if (nc < 1) nc = 1;
+  const int64_t nc = team_size(pool, listed / MIN_CHUNK, n);
   Chunks ch{n, nw, nc, std::vector<int64_t>(nc + 1, listed), std::vector<int64_t>(nc + 1, m)};
   for (int64_t c = 0; c < nc; ++c) {
     // chunk c from the first particle (index or rank) of the listed pair listed c / C on: as
@@ -1786,6 +1784,7 @@ static ffi::Error CountConductionImpl(ffi::Buffer<ffi::F64> temp, ffi::Buffer<ff
   const int32_t* J = I + m;
   const int32_t* C = counts.typed_data();
   double* Q = heat->typed_data();
+  const double unit = dt / h;  // a step's fraction of the thermal step (no division per slot)
   std::fill(Q, Q + n, 0.0);
   for (int64_t k = 0; k < m; ++k) {
     // every listed slot, its count 0 or not: a test of the count mispredicts where the
@@ -1793,7 +1792,7 @@ static ffi::Error CountConductionImpl(ffi::Buffer<ffi::F64> temp, ffi::Buffer<ff
     // a count 0 adds 0, as the JAX sum's slot does
     const int64_t i = I[k], j = J[k];
     if (i < 0 || j < 0 || i >= n || j >= n) continue;  // padding (at the list's end)
-    const double f = conductance(0, a, 0.5 * d[i], 0.5 * d[j], 0.0) * ((C[k] * dt) / h) *
+    const double f = conductance(0, a, 0.5 * d[i], 0.5 * d[j], 0.0) * (C[k] * unit) *
                      (T[j] - T[i]);
     Q[i] += f;
     Q[j] -= f;

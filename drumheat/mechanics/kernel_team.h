@@ -3,6 +3,7 @@
 #pragma once
 #include <atomic>
 #include <cstdint>
+#include <cstdlib>
 #include <functional>
 #include <memory>
 #include <thread>
@@ -11,6 +12,17 @@
 namespace drumheat {
 
 namespace ffi = xla::ffi;
+
+// The threads of a team for `most` threads' worth of work over n particles: the pool's
+// threads, at most `most`, and at most n; DRUMHEAT_KERNEL_THREADS sets the number exactly
+// (within [1, n]); at least 1.
+inline int64_t team_size(ffi::ThreadPool& pool, int64_t most, int64_t n) {
+  int64_t nc = pool.num_threads();
+  if (nc > most) nc = most;
+  if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nc = std::atoi(e);  // exactly
+  if (nc > n) nc = n;
+  return nc < 1 ? 1 : nc;
+}
 
 // The threads of one call's passes (contact_kernel.cc, Threads): team.each(run) runs run(c) for
 // the chunks c = 0 .. size() - 1 and returns when all are done. The team's pool threads

@@ -47,6 +47,7 @@ namespace ffi = xla::ffi;
 namespace {
 
 using drumheat::Team;
+using drumheat::team_size;
 
 // floor(x / size) as XLA converts it to s32 (saturating, NaN -> 0), then clipped or wrapped
 template <typename S>
@@ -199,11 +200,7 @@ void build(ffi::ThreadPool& pool, const S* x, int64_t n, const Grid& g, int32_t*
   // not wrap and the axis has five cells or more: then |dz| < 2 cells <= 0.4 L, dz / L rounds
   // to 0 and dz - L 0 is dz, bit for bit (the rounding for every pair cost 7 % of the build)
   const bool few = g.cells[D - 1] < 5;
-  int64_t nt = pool.num_threads();
-  if (nt > n / MIN_PARTICLES) nt = n / MIN_PARTICLES;
-  if (const char* e = std::getenv("DRUMHEAT_KERNEL_THREADS")) nt = std::atoi(e);  // exactly
-  if (nt > n) nt = n;
-  if (nt < 1) nt = 1;
+  const int64_t nt = team_size(pool, n / MIN_PARTICLES, n);
   IntoList list{out, m};
   std::vector<Aside> aside(nt - 1);
   Team team(pool, nt);
