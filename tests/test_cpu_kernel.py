@@ -573,6 +573,95 @@ def test_the_steps_kicks_and_drift_in_the_call(dim, dtype, shuffle):
 
 
 @needs_kernel
+@pytest.mark.parametrize("dim,dtype,shuffle", [(3, jnp.float64, True), (2, jnp.float32, True),
+                                               (3, jnp.float32, False)])
+def test_a_run_of_steps_in_the_call_is_its_steps_one_by_one(monkeypatch, dim, dtype, shuffle):
+    """A run of steps in one call (``steps``; the coming step's kicks, drift and records made
+    in the pass that sums the step's forces) gives what its steps give called one by one, each
+    from the outputs of the one before (the first with its half-kick pending or not, the
+    later ones with it pending), bit for bit: forces, torques, pair and wall springs, the
+    drifted state, the heat flows, the largest overlap of all steps and each slot's count of
+    the steps it conducted; in the particles' own numbering and in the cell order, in one
+    chunk and in three; a run whose skin test fails ends after the step that failed it, as
+    the steps called one by one tell."""
+    import dataclasses
+
+    from drumheat.mechanics.integrator import _carry_pairs
+    from drumheat.mechanics.neighbors import sort_pairs
+
+    kw = dict(shuffle=shuffle, one_material=True, shell_only=True)
+    st = _bed(dim, dtype, "jax", "overlap", 0.05, **kw)[1]
+    cdem = _bed(dim, dtype, "cpu", "overlap", 0.05, **kw)[0]
+    f, nb, n = cdem._forces.__wrapped__.func, cdem.neighbor, st.position.shape[0]
+    assert f.drifts
+    if shuffle:  # the cell order
+        cells = nb.grid.order(st.nbrs.reference_position)
+        st = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+        assert not np.array_equal(np.asarray(st.nbrs.order), np.arange(n))
+    # the reference positions some way behind, so that the skin test's displacements grow
+    rng = np.random.default_rng(5)
+    ref = st.nbrs.reference_position + jnp.asarray(rng.normal(0.0, 0.2 * nb.skin, (n, dim)), dtype)
+    st = st._replace(nbrs=dataclasses.replace(st.nbrs, reference_position=ref),
+                     force=jnp.asarray(rng.normal(0.0, 0.05, st.force.shape), dtype),
+                     torque=jnp.asarray(rng.normal(0.0, 1e-5, st.torque.shape), dtype))
+    dt, L = cdem.dt, nb.periodic_length
+    inv_m = 1.0 / cpu_kernel.shared_value(f.mass)
+    inv_i = 1.0 / cpu_kernel.shared_value(f.inertia)
+    ahead = cpu_kernel.skin_test_constants(dt, inv_m, L, nb.lo, dtype)
+
+    @jax.jit
+    def call(x, v, w, force, torque, ps, ws, aux, steps=None):
+        drift = (cpu_kernel.drift_constants(aux, dt, inv_m, inv_i, L, dtype), force, torque)
+        return f(x, v, w, st.time + dt, st.nbrs, ps, ws, temperature=st.extra, ahead=ahead,
+                 drift=drift, steps=steps)
+
+    def one_by_one(k):
+        """k steps called one by one: the last result, its drifted state, the largest
+        overlap, the counts and each step's skin test"""
+        x, v, w, F, M, ps, ws = (st.position, st.velocity, st.angular_velocity, st.force,
+                                 st.torque, st.pair_spring, st.wall_spring)
+        pc = wc = 0
+        most, tests = -np.inf, []
+        for s in range(k):
+            r = call(x, v, w, F, M, ps, ws, jnp.asarray(0.0 if s == 0 else 1.0, dtype))
+            x, v, w = r.drifted
+            F, M, ps, ws = r.force, r.torque, r.pair_spring, r.wall_spring
+            pc = pc + np.asarray(r.contacts.pair_conducts, np.int32)
+            wc = wc + np.asarray(r.contacts.wall_conducts, np.int32)
+            most = max(most, float(r.max_overlap))
+            tests.append(float(r.ahead))
+        return r, most, (pc, wc), np.array(tests)
+
+    K = 12
+    for threads in ("1", "3"):
+        monkeypatch.setenv("DRUMHEAT_KERNEL_THREADS", threads)
+        want, most, counts, tests = one_by_one(K)
+        # the whole run (the test always passes), and one that the skin test ends: half the
+        # skin squared the largest displacement of the first six steps
+        h = tests[:6].max()
+        stop = 1 + 6 + int(np.argmax(tests[6:] > h))
+        assert tests[stop - 1] > h and stop < K  # the displacements grow: the run is ended
+        for half_skin2, made in ((np.inf, K), (h, stop)):
+            got = call(st.position, st.velocity, st.angular_velocity, st.force, st.torque,
+                       st.pair_spring, st.wall_spring, jnp.asarray(0.0, dtype),
+                       steps=jnp.asarray([K, min(half_skin2, 1e30)], dtype))
+            assert int(got.counted[2][0]) == made
+            if made < K:
+                want, most, counts, _ = one_by_one(made)
+            for x, y in zip(jax.tree_util.tree_leaves((want.force, want.torque, want.pair_spring,
+                                                       want.wall_spring, want.drifted, want.heat,
+                                                       want.ahead)),
+                            jax.tree_util.tree_leaves((got.force, got.torque, got.pair_spring,
+                                                       got.wall_spring, got.drifted, got.heat,
+                                                       got.ahead))):
+                np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+            assert float(got.max_overlap) == most
+            np.testing.assert_array_equal(np.asarray(got.counted[0]), counts[0])
+            np.testing.assert_array_equal(np.asarray(got.counted[1]), counts[1])
+            assert counts[0].max() > 0 and counts[1].max() > 0
+
+
+@needs_kernel
 @pytest.mark.parametrize("dim,dtype,switch", [(2, jnp.float64, "looks_ahead"),
                                               (3, jnp.float64, "looks_ahead"),
                                               (2, jnp.float64, "drifts"),

@@ -65,7 +65,9 @@
 // positions, 18 the velocities and 19 the spins after the step's kicks and drift, at which the
 // call computes the contacts (cpu_kernel.py aliases them with inputs 0-2, and the forces and
 // torques, outputs 0-1, with inputs 24-25: updated in place; the loop reads 24-25 only in the
-// pass that packs the records, before it sums a force); with input 26 (else length 0 each) 20
+// pass that packs the records, before it sums a force, and in a run of steps a particle's
+// force and torque in the pass that sums them, after it has); with input 26 (else length 0
+// each) 20
 // each pair slot's (M) and 21 each wall slot's (N W) count of the steps it conducted (the flags
 // of outputs 11 and 16 summed over the run's steps) s32 and 22 the steps made (1) s32.
 //
@@ -79,9 +81,16 @@
 // output 9, the largest overlap ratio of all steps. The same numbers as one call per step:
 // each step's arithmetic is the call's, and the counts are integers. The loop's caller (XLA)
 // then returns only at a thermal step, a rebuild or the end of a chunk. The steps share what
-// depends only on the list (the chunks, the cell order's layout: Shared) and the threads
-// (Team), and a step after the first leaves the padding slots' outputs as the first wrote
-// them (the same buffers).
+// depends only on the list (the chunks, the cell order's layout: Shared), the threads (Team)
+// and their buffers (the records, the chunks' accumulators: Carry), and a step after the first
+// leaves the padding slots' outputs as the first wrote them (the same buffers). A step that
+// another may follow makes that step's kicks and drift in the pass that adds its own forces,
+// for each particle as soon as its force and torque are summed, into the records (Carry): the
+// coming step has no packing pass (which read each particle's x, v, w, F and M at its index
+// and wrote x', v', w' back there), and writes its x',
+// v', w' out (outputs 17-19) in its own sum pass; that pass also zeroes the accumulators it
+// has read, for the coming step (no memset of them). Where the skin test then ends the run,
+// the coming step's records go unused; the outputs are the step's.
 //
 // The step's kicks and drift (inputs 23-25; integrator.run_segments): the positions, velocities
 // and spins given are those of the step before, the velocities and spins at its half step with
@@ -94,7 +103,8 @@
 // x86-64 (it fuses each product and sum into a multiply-add and folds (dt / 2) (1 / m) into
 // one constant); then the contacts at x', v', w' as if they had been given. It runs in the pass
 // that packs the particles' records (the one pass that reads them), where XLA made three passes
-// over the particles and wrote them out for the loop to read back. The walls' geometry is then
+// over the particles and wrote them out for the loop to read back; in a run of steps, for
+// every step after the first, in the step before's sum pass (above). The walls' geometry is then
 // the loop's own (no walls, or the drum shell alone, input 22): JAX's would be that of the
 // positions before the drift.
 //
@@ -209,7 +219,8 @@
 // spins, masses and moments of inertia, into one record per particle each (pack_particles; 12
 // values per particle, in a buffer that lives across calls; in the cell order where there is
 // one: this copy is the one that lays the data out), so that the pair loop reads a partner's
-// data from one cache line instead of from one per array.
+// data from one cache line instead of from one per array; a run's later steps get theirs from
+// the sum pass of the step before (a run of steps, above).
 //
 // Vector instructions: a chunk takes its pair slots in blocks of 256; within_reach tells which
 // lie within reach, Loop::tile gathers those 64 at a time into a Tile (one array per quantity)
@@ -1184,19 +1195,26 @@ struct Drift {
     const S* q = static_cast<const S*>(k.drift);
     a = q[0]; c = q[1]; ci = q[2]; dt = q[3]; L = q[4];
   }
-  __attribute__((always_inline)) inline void step(int64_t i, bool rot) const {
+  // one particle's x', v', w' (yx, yv, yw) from its x, v, w (xi, vi, wi) and the forces and
+  // torques fi, ti (an output may be its input's memory: each value is read, then written)
+  __attribute__((always_inline)) inline void advance(const S* xi, const S* vi, const S* wi,
+                                                     const S* fi, const S* ti, bool rot, S* yx,
+                                                     S* yv, S* yw) const {
     for (int q = 0; q < D; ++q) {
-      const S f = F[D*i + q];
-      const S u = std::fma(f, c, std::fma(a*f, c, v[D*i + q]));  // the two half-kicks
-      S y = std::fma(u, dt, x[D*i + q]);
+      const S f = fi[q];
+      const S u = std::fma(f, c, std::fma(a*f, c, vi[q]));  // the two half-kicks
+      S y = std::fma(u, dt, xi[q]);
       if (q == D - 1 && L > S(0)) y = y >= L ? y - L : (y < S(0) ? y + L : y);
-      V[D*i + q] = u;
-      X[D*i + q] = y;
+      yv[q] = u;
+      yx[q] = y;
     }
     for (int q = 0; q < DW; ++q) {
-      const S t = M[DW*i + q], s = w[DW*i + q];
-      W[DW*i + q] = rot ? std::fma(t, ci, std::fma(a*t, ci, s)) : s;
+      const S t = ti[q], s = wi[q];
+      yw[q] = rot ? std::fma(t, ci, std::fma(a*t, ci, s)) : s;
     }
+  }
+  __attribute__((always_inline)) inline void step(int64_t i, bool rot) const {
+    advance(x + D*i, v + D*i, w + DW*i, F + D*i, M + DW*i, rot, X + D*i, V + D*i, W + DW*i);
   }
 };
 
@@ -1227,33 +1245,52 @@ DRUMHEAT_FMA_CLONES void pack_range(const Loop<S, D>& lp, const Drift<S, D>& dr,
   }
 }
 
+// What the steps of one call carry from one to the next (run_steps; a call of one step has
+// its own): the particles' records (pack_particles) and the chunks' accumulators (run), each
+// buffer taken from the pool once and given back when the call is done. With `next` (a step
+// follows, unless the skin test stops the run) a step's pass that adds the chunks' sums makes
+// the coming step's kicks, drift and records for the particles it has just summed and zeroes
+// the accumulators it has read: the coming step then needs no pass of its own that reads each
+// particle's x, v, w, F and M in its numbering and writes x', v', w' there (`drifted`: its
+// records hold them, and its own sum pass writes them out, outputs 17-19), nor zeroed
+// accumulators (`zeroed`). The same arithmetic (Drift::advance), in other passes.
+template <typename S>
+struct Carry {
+  std::unique_ptr<Buffer> packed;
+  S *xr = nullptr, *vw = nullptr, *rho = nullptr;  // the records (pack_particles)
+  std::vector<std::unique_ptr<Buffer>> acc;
+  bool next = false, drifted = false, zeroed = false;
+  Carry() = default;
+  Carry(const Carry&) = delete;
+  Carry& operator=(const Carry&) = delete;
+  ~Carry() {
+    if (packed) give_buffer(std::move(packed));
+    for (auto& b : acc) give_buffer(std::move(b));
+  }
+};
+
 // The particles' data packed into records, in the cell order `od` (null: their own numbering),
-// in one buffer from the pool: the positions and radii XR values per particle, (x_0 .. x_{D-1},
+// in one buffer of the carry: the positions and radii XR values per particle, (x_0 .. x_{D-1},
 // r, 0 ...), read by the scan for both partners of every listed pair, and the velocities, spins,
 // masses and moments of inertia VW values per particle, read by the tiles for the pairs within
 // reach and by the walls: each partner's come from one cache line instead of from one per
-// array, and the one copy lays them out in the cell order too. lp.XRp and lp.VWp are set to
-// them (and lp.RHO, with the drum shell, to the particles' distances from its axis); the
-// caller gives the buffer back when the loop is done.
+// array, and the one copy lays them out in the cell order too. With the drum shell, rho holds
+// each particle's distance from its axis after them. The carry's xr, vw and rho point at them.
 template <typename S, int D>
-std::unique_ptr<Buffer> pack_particles(Team& team, Loop<S, D>& lp, const int32_t* od) {
+void pack_particles(Team& team, const Loop<S, D>& lp, const int32_t* od, Carry<S>& cy) {
   constexpr int DW = Loop<S, D>::DW;
   static_assert(D + 1 <= XR && D + DW + 2 <= VW, "a record holds the particle's data");
   const int64_t n = lp.n;
   const int64_t k = lp.SH ? XR + VW + 1 : XR + VW;  // values per particle
-  std::unique_ptr<Buffer> buf = take_buffer((static_cast<int64_t>(sizeof(S))*k*n + 7)/8);
-  S* xr = reinterpret_cast<S*>(buf->data());
-  S* vw = xr + XR*n;
-  S* rho = lp.SH ? vw + VW*n : nullptr;
+  if (!cy.packed) cy.packed = take_buffer((static_cast<int64_t>(sizeof(S))*k*n + 7)/8);
+  cy.xr = reinterpret_cast<S*>(cy.packed->data());
+  cy.vw = cy.xr + XR*n;
+  cy.rho = lp.SH ? cy.vw + VW*n : nullptr;
   const Drift<S, D> dr(lp.a);
   const int64_t nc = team.size();
   team.each([&](int c) {
-    pack_range<S, D>(lp, dr, od, n*c/nc, n*(c + 1)/nc, xr, vw, rho);
+    pack_range<S, D>(lp, dr, od, n*c/nc, n*(c + 1)/nc, cy.xr, cy.vw, cy.rho);
   });
-  lp.XRp = xr;
-  lp.VWp = vw;
-  lp.RHO = rho;
-  return buf;
 }
 
 // The coming step's skin test (see the header): moved(i, f) is particle i's squared
@@ -1287,23 +1324,108 @@ struct Ahead {
   }
 };
 
-// One step: the contacts of call a, with the layout and chunks sh and the team's threads
+// The pass that adds the chunks' sums (run, sum_range) for the particles whose data lie at
+// [p0, p1): each particle's sums of all chunks, added in chunk order (the order of the terms of
+// each sum does not depend on how the particles are cut), put back in the particles' numbering
+// with the cell order, and the body force; then what needs the particle's force (finish): this
+// step's x', v', w' written out from the records (Carry::drifted), the coming step's skin test
+// (the range's largest squared displacement is returned) and the coming step's kicks, drift
+// and records (Carry::next), the accumulators zeroed where they were read (also with next)
 template <typename S, int D>
-bool run(Team& team, const Shared& sh, const Call& a) {
+struct Sums {
+  static constexpr int DW = D == 3 ? 3 : 1;
+  // all by value, and copied once more into each range's pass (sum_range), so that the
+  // compiler need not load them again after each value it stores
+  Ahead<S, D> ahead;
+  Drift<S, D> coming;  // the coming step's kicks and drift: this step's, a = 1 (header)
+  S *xr, *vw, *rho;  // the records (Carry)
+  bool drifted, next, rot, heat_on;
+  const int32_t* od;  // the cell order (null: none)
+  double* const* acc;  // the chunks' accumulators
+  int64_t nc, n, fs, bs;
+  S *F0, *T0;
+  double* Q0;
+  const S* body;
+  S *X, *V, *W;  // outputs 17-19
+
+  Sums(const Loop<S, D>& l, const Ahead<S, D>& ah, const Carry<S>& c,
+       const std::vector<double*>& accs, int64_t fs_, const int32_t* order)
+      : ahead(ah), coming(l.a), xr(c.xr), vw(c.vw), rho(c.rho), drifted(c.drifted),
+        next(c.next), rot(l.rot), heat_on(l.heat_on), od(order), acc(accs.data()),
+        nc(static_cast<int64_t>(accs.size())), n(l.n), fs(fs_), bs(l.a.body_step),
+        F0(static_cast<S*>(l.a.F)), T0(static_cast<S*>(l.a.T)), Q0(l.a.Q),
+        body(static_cast<const S*>(l.a.body)), X(static_cast<S*>(l.a.DX)),
+        V(static_cast<S*>(l.a.DV)), W(static_cast<S*>(l.a.DWo)) {
+    coming.a = S(1);
+  }
+
+  // particle u, whose data lie at p, once its force and torque are summed (see above)
+  __attribute__((always_inline)) inline S finish(int64_t p, int64_t u, S far) const {
+    S* x = xr + XR*p;
+    S* vs = vw + VW*p;
+    if (drifted) {
+      for (int q = 0; q < D; ++q) { X[D*u + q] = x[q]; V[D*u + q] = vs[q]; }
+      for (int q = 0; q < DW; ++q) W[DW*u + q] = vs[D + q];
+    }
+    if (ahead.on) far = std::max(far, ahead.moved(u, F0 + D*u));
+    if (next) {
+      coming.advance(x, vs, vs + D, F0 + D*u, T0 + DW*u, rot, x, vs, vs + D);
+      if (rho) rho[p] = std::sqrt(std::fma(x[0], x[0], x[1]*x[1]));  // as pack_range
+    }
+    return far;
+  }
+};
+
+template <typename S, int D>
+DRUMHEAT_FMA_CLONES S sum_range(const Sums<S, D>& all, int64_t p0, int64_t p1) {
+  constexpr int DW = Sums<S, D>::DW;
+  const Sums<S, D> sm = all;
+  const int64_t n = sm.n, fs = sm.fs, nc = sm.nc;
+  S far = S(0);
+  for (int64_t p = p0; p < p1; ++p) {
+    const int64_t u = sm.od ? sm.od[p] : p;  // the particle whose data lie at p
+    S f[D], t[DW];
+    double q = 0;
+    for (int64_t c = 0; c < nc; ++c) {
+      double* b = sm.acc[c];
+      S* g = reinterpret_cast<S*>(b);
+      for (int k = 0; k < D; ++k) f[k] = c ? f[k] + g[D*p + k] : g[D*p + k];
+      for (int k = 0; k < DW; ++k) t[k] = c ? t[k] + g[D*n + DW*p + k] : g[D*n + DW*p + k];
+      if (sm.heat_on) q = c ? q + b[fs + p] : b[fs + p];
+      if (sm.next) {  // zeroed for the coming step
+        for (int k = 0; k < D; ++k) g[D*p + k] = S(0);
+        for (int k = 0; k < DW; ++k) g[D*n + DW*p + k] = S(0);
+        if (sm.heat_on) b[fs + p] = 0;
+      }
+    }
+    for (int k = 0; k < D; ++k) sm.F0[D*u + k] = sm.body ? f[k] + sm.body[sm.bs*u + k] : f[k];
+    for (int k = 0; k < DW; ++k) sm.T0[DW*u + k] = t[k];
+    if (sm.heat_on) sm.Q0[u] = q;
+    far = sm.finish(p, u, far);
+  }
+  return far;
+}
+
+// One step: the contacts of call a, with the layout and chunks sh, the team's threads and what
+// the steps of the call carry (cy)
+template <typename S, int D>
+bool run(Team& team, const Shared& sh, const Call& a, Carry<S>& cy) {
   constexpr int DW = Loop<S, D>::DW;
   Loop<S, D> lp(a);
   const int64_t n = a.n;
   const bool heat_on = lp.heat_on;
   // with a cell order the pairs are taken in the list's order (grouped in the cell order by
-  // the neighbour build), the chunks are ranges of ranks and sum at the ranks, every chunk into
-  // its own buffer, and the sums are put back in the particles' numbering at the end; without,
-  // chunk 0 sums into the outputs
+  // the neighbour build), the chunks are ranges of ranks and sum at the ranks, and the sums are
+  // put back in the particles' numbering at the end; every chunk sums into its own buffer
   const bool ranked = sh.ranked;
   const Chunks& ch = sh.ch;
   const int64_t nc = ch.nc;
   lp.TK = sh.temp;
   lp.RK = sh.rank;
-  std::unique_ptr<Buffer> packed = pack_particles<S, D>(team, lp, ranked ? a.order : nullptr);
+  if (!cy.drifted) pack_particles<S, D>(team, lp, ranked ? a.order : nullptr, cy);
+  lp.XRp = cy.xr;
+  lp.VWp = cy.vw;
+  lp.RHO = cy.rho;
   auto work = [&](const Chunks& ch, int64_t c, S* F, S* T, double* Q, double* R) -> S {
     if (!a.later) lp.padding(ch.pb[c], ch.pb[c + 1]);
     const S p = lp.pairs(ch.kb[c], ch.kb[c + 1], F, T, Q, R);
@@ -1311,89 +1433,49 @@ bool run(Team& team, const Shared& sh, const Call& a) {
     return p > q ? p : q;
   };
 
-  S* F0 = static_cast<S*>(a.F);
-  S* T0 = static_cast<S*>(a.T);
-  double *Q0 = a.Q, *R0 = a.R;
+  double* R0 = a.R;
   S* MX = static_cast<S*>(a.MX);
   // a buffer holds the (D + DW) N forces and torques in its first fs doubles, then N doubles
   // of conduction heat, then 3 of loss rates
   const int64_t fs = (static_cast<int64_t>(sizeof(S)) * (D + DW) * n + 7) / 8;
-  const int64_t own = ranked ? 0 : 1;  // the chunks that sum into the outputs
-  std::vector<std::unique_ptr<Buffer>> acc(nc - own);
-  for (auto& b : acc) b = take_buffer(fs + n + 3);
+  if (cy.acc.empty()) {
+    cy.acc.resize(nc);
+    for (auto& b : cy.acc) b = take_buffer(fs + n + 3);
+    cy.zeroed = false;
+  }
   std::vector<S> mx(nc, S(0));
   team.each([&](int c) {
-    S *F = F0, *T = T0;
-    double *Q = Q0, *R = R0;
-    if (c >= own) {
-      double* b = acc[c - own]->data();
-      F = reinterpret_cast<S*>(b); T = F + D * n; Q = b + fs; R = b + fs + n;
+    double* b = cy.acc[c]->data();
+    S* F = reinterpret_cast<S*>(b);
+    S* T = F + D * n;
+    double *Q = b + fs, *R = b + fs + n;
+    if (!cy.zeroed) {
+      std::memset(F, 0, sizeof(S) * D * n);
+      std::memset(T, 0, sizeof(S) * DW * n);
+      if (heat_on) std::memset(Q, 0, sizeof(double) * n);
     }
-    std::memset(F, 0, sizeof(S) * D * n);
-    std::memset(T, 0, sizeof(S) * DW * n);
-    if (heat_on) std::memset(Q, 0, sizeof(double) * n);
     std::memset(R, 0, sizeof(double) * 3);
     mx[c] = work(ch, c, F, T, Q, R);
   });
   S max_ov = mx[0];
   for (int64_t c = 1; c < nc; ++c)
     if (mx[c] > max_ov) max_ov = mx[c];
-  const S* body = static_cast<const S*>(a.body);
-  const int64_t bs = a.body_step;
   const Ahead<S, D> ahead(a);
+  std::vector<double*> accs;
+  for (const auto& b : cy.acc) accs.push_back(b->data());
+  const Sums<S, D> sm(lp, ahead, cy, accs, fs, ranked ? a.order : nullptr);
   std::vector<S> far(nc, S(0));  // each range's largest squared displacement (skin test)
-  if (!ranked) {
-    // the other chunks' sums added to chunk 0's, for each value in chunk order, then the body
-    // force (the order of the terms of each sum does not depend on how the particles are cut)
-    team.each([&](int cc) {
-      const int64_t p0 = n*cc/nc, p1 = n*(cc + 1)/nc;
-      for (int64_t c = 1; c < nc; ++c) {
-        const double* b = acc[c - 1]->data();
-        const S* f = reinterpret_cast<const S*>(b);
-        for (int64_t q = D * p0; q < D * p1; ++q) F0[q] += f[q];
-        for (int64_t q = DW * p0; q < DW * p1; ++q) T0[q] += f[D * n + q];
-        if (heat_on)
-          for (int64_t q = p0; q < p1; ++q) Q0[q] += b[fs + q];
-      }
-      if (body)
-        for (int64_t p = p0; p < p1; ++p)
-          for (int k = 0; k < D; ++k) F0[D*p + k] += body[bs*p + k];
-      if (ahead.on)
-        for (int64_t p = p0; p < p1; ++p) far[cc] = std::max(far[cc], ahead.moved(p, F0 + D*p));
-    });
-    for (int64_t c = 1; c < nc; ++c)
-      for (int q = 0; q < 3; ++q) R0[q] += acc[c - 1]->data()[fs + n + q];
-  } else {  // the chunks' sums, added in chunk order as above, back in the particles' numbering
-    const int32_t* od = a.order;
-    team.each([&](int cc) {
-      for (int64_t p = n*cc/nc; p < n*(cc + 1)/nc; ++p) {
-        const int64_t u = od[p];
-        S f[D], t[DW];
-        double q = 0;
-        for (int64_t c = 0; c < nc; ++c) {
-          const double* b = acc[c]->data();
-          const S* g = reinterpret_cast<const S*>(b);
-          for (int k = 0; k < D; ++k) f[k] = c ? f[k] + g[D*p + k] : g[D*p + k];
-          for (int k = 0; k < DW; ++k) t[k] = c ? t[k] + g[D*n + DW*p + k] : g[D*n + DW*p + k];
-          if (heat_on) q = c ? q + b[fs + p] : b[fs + p];
-        }
-        for (int k = 0; k < D; ++k) F0[D*u + k] = body ? f[k] + body[bs*u + k] : f[k];
-        for (int k = 0; k < DW; ++k) T0[DW*u + k] = t[k];
-        if (heat_on) Q0[u] = q;
-        if (ahead.on) far[cc] = std::max(far[cc], ahead.moved(u, F0 + D*u));
-      }
-    });
-    for (int q = 0; q < 3; ++q) {
-      double r = 0;
-      for (int64_t c = 0; c < nc; ++c) {
-        const double rc = acc[c]->data()[fs + n + q];
-        r = c ? r + rc : rc;
-      }
-      R0[q] = r;
+  team.each([&](int cc) { far[cc] = sum_range<S, D>(sm, n*cc/nc, n*(cc + 1)/nc); });
+  for (int q = 0; q < 3; ++q) {  // the loss rates, added in chunk order
+    double r = 0;
+    for (int64_t c = 0; c < nc; ++c) {
+      const double rc = cy.acc[c]->data()[fs + n + q];
+      r = c ? r + rc : rc;
     }
+    R0[q] = r;
   }
-  for (auto& b : acc) give_buffer(std::move(b));
-  give_buffer(std::move(packed));
+  cy.drifted = cy.next;
+  cy.zeroed = cy.next;
   MX[0] = max_ov;
   if (ahead.on) {
     S most = S(0);
@@ -1414,7 +1496,8 @@ bool run_steps(ffi::ThreadPool& pool, const Call& a) {
   if (!share(pool, a.P, a.order, a.n, a.m, a.nw, sh)) return false;
   Team team(pool, sh.ch.nc);
   gather_temperatures(team, a, sh);
-  if (!a.steps) return run<S, D>(team, sh, a);
+  Carry<S> cy;
+  if (!a.steps) return run<S, D>(team, sh, a, cy);
   const S* st = static_cast<const S*>(a.steps);
   const int64_t most = static_cast<int64_t>(st[0]);
   const S half_skin2 = st[1];
@@ -1428,7 +1511,8 @@ bool run_steps(ffi::ThreadPool& pool, const Call& a) {
   S mx = S(0);
   int32_t done = 0;
   while (true) {
-    if (!run<S, D>(team, sh, b)) return false;
+    cy.next = done + 1 < most;  // another step, unless this one's skin test stops the run
+    if (!run<S, D>(team, sh, b, cy)) return false;
     ++done;
     const S m = MX[0];
     if (m > mx || m != m) mx = m;  // (a NaN carried, as jnp.maximum)
