@@ -1436,11 +1436,12 @@ bool run(Team& team, const Shared& sh, const Call& a, Carry<S>& cy) {
   double* R0 = a.R;
   S* MX = static_cast<S*>(a.MX);
   // a buffer holds the (D + DW) N forces and torques in its first fs doubles, then N doubles
-  // of conduction heat, then 3 of loss rates
+  // of conduction heat (with it: nq = N), then 3 of loss rates
   const int64_t fs = (static_cast<int64_t>(sizeof(S)) * (D + DW) * n + 7) / 8;
+  const int64_t nq = heat_on ? n : 0;
   if (cy.acc.empty()) {
     cy.acc.resize(nc);
-    for (auto& b : cy.acc) b = take_buffer(fs + n + 3);
+    for (auto& b : cy.acc) b = take_buffer(fs + nq + 3);
     cy.zeroed = false;
   }
   std::vector<S> mx(nc, S(0));
@@ -1448,7 +1449,7 @@ bool run(Team& team, const Shared& sh, const Call& a, Carry<S>& cy) {
     double* b = cy.acc[c]->data();
     S* F = reinterpret_cast<S*>(b);
     S* T = F + D * n;
-    double *Q = b + fs, *R = b + fs + n;
+    double *Q = b + fs, *R = b + fs + nq;
     if (!cy.zeroed) {
       std::memset(F, 0, sizeof(S) * D * n);
       std::memset(T, 0, sizeof(S) * DW * n);
@@ -1469,7 +1470,7 @@ bool run(Team& team, const Shared& sh, const Call& a, Carry<S>& cy) {
   for (int q = 0; q < 3; ++q) {  // the loss rates, added in chunk order
     double r = 0;
     for (int64_t c = 0; c < nc; ++c) {
-      const double rc = cy.acc[c]->data()[fs + n + q];
+      const double rc = cy.acc[c]->data()[fs + nq + q];
       r = c ? r + rc : rc;
     }
     R0[q] = r;
