@@ -127,6 +127,19 @@ def _bed(dim, dtype, kernel, law="projected", gap_tolerance=0.0, seed=0, rolling
     return dem, st
 
 
+def _in_cell_order(st, dem):
+    """``st`` with its neighbour list in the cell order of ``dem``'s grid, the pairs' springs
+    carried (a bed as small as these does not get that order from ``layout_order``)."""
+    import dataclasses
+
+    from drumheat.mechanics.integrator import _carry_pairs
+    from drumheat.mechanics.neighbors import sort_pairs
+
+    n = st.position.shape[0]
+    cells = dem.neighbor.grid.order(st.nbrs.reference_position)
+    return _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+
+
 def _forces(dem, st):
     """Force, torque, pair springs, wall springs, Contacts, max overlap, heat flows."""
     return dem._forces(st.position, st.velocity, st.angular_velocity, st.time, st.nbrs,
@@ -373,19 +386,12 @@ def test_the_body_force_is_added_last(monkeypatch, dim, dtype, shuffle):
     to each particle's sum of contact forces last: the forces are the loop's without it plus
     the body force, bit for bit, in one chunk and in three, in the particles' own numbering and
     in the cell order; nothing else changes."""
-    import dataclasses
-
-    from drumheat.mechanics.integrator import _carry_pairs
-    from drumheat.mechanics.neighbors import sort_pairs
-
     st = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=shuffle)[1]
     cdem = _bed(dim, dtype, "cpu", "overlap", 0.05, shuffle=shuffle)[0]
     f = cdem._forces.__wrapped__.func  # the CpuContactForces of the DEM
     n = st.position.shape[0]
     if shuffle:  # the cell order (test_the_cell_order)
-        cells = cdem.neighbor.grid.order(st.nbrs.reference_position)
-        st = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells),
-                          n)
+        st = _in_cell_order(st, cdem)
     geometry = f.wall_geometry(st.position, st.time)
     rows = jnp.asarray(np.random.default_rng(5).normal(0.0, 1e-3, (n, dim)), dtype)
 
@@ -458,8 +464,7 @@ def test_the_coming_steps_skin_test_in_the_call(monkeypatch, dim, dtype, shuffle
     it changes no other output; a class that cannot make it refuses."""
     import dataclasses
 
-    from drumheat.mechanics.integrator import _carry_pairs, wrap_periodic_axis
-    from drumheat.mechanics.neighbors import sort_pairs
+    from drumheat.mechanics.integrator import wrap_periodic_axis
 
     st = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=shuffle, one_material=True)[1]
     jdem = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=shuffle, one_material=True)[0]
@@ -467,8 +472,7 @@ def test_the_coming_steps_skin_test_in_the_call(monkeypatch, dim, dtype, shuffle
     f, nb, n = cdem._forces.__wrapped__.func, cdem.neighbor, st.position.shape[0]
     assert f.looks_ahead and not jdem._forces.__wrapped__.func.looks_ahead
     if shuffle:  # the cell order
-        cells = nb.grid.order(st.nbrs.reference_position)
-        st = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+        st = _in_cell_order(st, cdem)
     # the reference positions a few half-skins behind, so that the test has a spread to find
     rng = np.random.default_rng(7)
     ref = st.nbrs.reference_position + jnp.asarray(rng.normal(0.0, 0.3 * nb.skin, (n, dim)), dtype)
@@ -515,10 +519,7 @@ def test_the_steps_kicks_and_drift_in_the_call(dim, dtype, shuffle):
     drifted state equal XLA's kicks and drift (integrator.run_segments' arithmetic, jitted)
     followed by the call at their result, bit for bit, in the particles' own numbering and in
     the cell order; a kernel or a bed that cannot make them refuses."""
-    import dataclasses
-
-    from drumheat.mechanics.integrator import _carry_pairs, wrap_periodic_axis
-    from drumheat.mechanics.neighbors import sort_pairs
+    from drumheat.mechanics.integrator import wrap_periodic_axis
 
     kw = dict(shuffle=shuffle, one_material=True, shell_only=True)
     st = _bed(dim, dtype, "jax", "overlap", 0.05, **kw)[1]
@@ -526,8 +527,7 @@ def test_the_steps_kicks_and_drift_in_the_call(dim, dtype, shuffle):
     f, n = cdem._forces.__wrapped__.func, st.position.shape[0]
     assert f.drifts
     if shuffle:  # the cell order
-        cells = cdem.neighbor.grid.order(st.nbrs.reference_position)
-        st = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+        st = _in_cell_order(st, cdem)
     rng = np.random.default_rng(3)
     st = st._replace(force=jnp.asarray(rng.normal(0.0, 0.05, st.force.shape), dtype),
                      torque=jnp.asarray(rng.normal(0.0, 1e-5, st.torque.shape), dtype))
@@ -586,17 +586,13 @@ def test_a_run_of_steps_in_the_call_is_its_steps_one_by_one(monkeypatch, dim, dt
     the steps called one by one tell."""
     import dataclasses
 
-    from drumheat.mechanics.integrator import _carry_pairs
-    from drumheat.mechanics.neighbors import sort_pairs
-
     kw = dict(shuffle=shuffle, one_material=True, shell_only=True)
     st = _bed(dim, dtype, "jax", "overlap", 0.05, **kw)[1]
     cdem = _bed(dim, dtype, "cpu", "overlap", 0.05, **kw)[0]
     f, nb, n = cdem._forces.__wrapped__.func, cdem.neighbor, st.position.shape[0]
     assert f.drifts
     if shuffle:  # the cell order
-        cells = nb.grid.order(st.nbrs.reference_position)
-        st = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+        st = _in_cell_order(st, cdem)
         assert not np.array_equal(np.asarray(st.nbrs.order), np.arange(n))
     # the reference positions some way behind, so that the skin test's displacements grow
     rng = np.random.default_rng(5)
@@ -780,9 +776,6 @@ def test_the_cell_order(monkeypatch, dim, dtype):
     refused."""
     import dataclasses
 
-    from drumheat.mechanics.integrator import _carry_pairs
-    from drumheat.mechanics.neighbors import sort_pairs
-
     # numbered along the lattice, the numbering will do (canonical list, order 0 .. N-1)
     st = _bed(dim, dtype, "jax", "overlap", 0.05)[1]
     cs = _bed(dim, dtype, "cpu", "overlap", 0.05)[0].adopt(st)
@@ -793,8 +786,7 @@ def test_the_cell_order(monkeypatch, dim, dtype):
     jdem, st = _bed(dim, dtype, "jax", "overlap", 0.05, shuffle=True)
     cdem = _bed(dim, dtype, "cpu", "overlap", 0.05, shuffle=True)[0]
     n = st.position.shape[0]
-    cells = cdem.neighbor.grid.order(st.nbrs.reference_position)
-    cs = _carry_pairs(st, sort_pairs(dataclasses.replace(st.nbrs, order=cells), n, cells), n)
+    cs = _in_cell_order(st, cdem)
     assert st.nbrs.order is None
     order = np.asarray(cs.nbrs.order)
     assert not np.array_equal(order, np.arange(n))  # the bed's numbering is not its cells
