@@ -1251,15 +1251,17 @@ DRUMHEAT_FMA_CLONES void pack_range(const Loop<S, D>& lp, const Drift<S, D>& dr,
 // follows, unless the skin test stops the run) a step's pass that adds the chunks' sums makes
 // the coming step's kicks, drift and records for the particles it has just summed and zeroes
 // the accumulators it has read: the coming step then needs no pass of its own that reads each
-// particle's x, v, w, F and M in its numbering and writes x', v', w' there (`drifted`: its
-// records hold them, and its own sum pass writes them out, outputs 17-19), nor zeroed
-// accumulators (`zeroed`). The same arithmetic (Drift::advance), in other passes.
+// particle's x, v, w, F and M in its numbering and writes x', v', w' there, nor a memset of
+// the accumulators (`drifted`: its records hold x', v', w', which its own sum pass writes out,
+// outputs 17-19, and its accumulators are zero). The same arithmetic (Drift::advance), in
+// other passes.
 template <typename S>
 struct Carry {
   std::unique_ptr<Buffer> packed;
   S *xr = nullptr, *vw = nullptr, *rho = nullptr;  // the records (pack_particles)
   std::vector<std::unique_ptr<Buffer>> acc;
-  bool next = false, drifted = false, zeroed = false;
+  std::vector<double*> accp;  // their data
+  bool next = false, drifted = false;
   Carry() = default;
   Carry(const Carry&) = delete;
   Carry& operator=(const Carry&) = delete;
@@ -1348,11 +1350,11 @@ struct Sums {
   const S* body;
   S *X, *V, *W;  // outputs 17-19
 
-  Sums(const Loop<S, D>& l, const Ahead<S, D>& ah, const Carry<S>& c,
-       const std::vector<double*>& accs, int64_t fs_, const int32_t* order)
+  Sums(const Loop<S, D>& l, const Ahead<S, D>& ah, const Carry<S>& c, int64_t fs_,
+       const int32_t* order)
       : ahead(ah), coming(l.a), xr(c.xr), vw(c.vw), rho(c.rho), drifted(c.drifted),
-        next(c.next), rot(l.rot), heat_on(l.heat_on), od(order), acc(accs.data()),
-        nc(static_cast<int64_t>(accs.size())), n(l.n), fs(fs_), bs(l.a.body_step),
+        next(c.next), rot(l.rot), heat_on(l.heat_on), od(order), acc(c.accp.data()),
+        nc(static_cast<int64_t>(c.accp.size())), n(l.n), fs(fs_), bs(l.a.body_step),
         F0(static_cast<S*>(l.a.F)), T0(static_cast<S*>(l.a.T)), Q0(l.a.Q),
         body(static_cast<const S*>(l.a.body)), X(static_cast<S*>(l.a.DX)),
         V(static_cast<S*>(l.a.DV)), W(static_cast<S*>(l.a.DWo)) {
@@ -1441,8 +1443,10 @@ bool run(Team& team, const Shared& sh, const Call& a, Carry<S>& cy) {
   const int64_t nq = heat_on ? n : 0;
   if (cy.acc.empty()) {
     cy.acc.resize(nc);
-    for (auto& b : cy.acc) b = take_buffer(fs + nq + 3);
-    cy.zeroed = false;
+    for (auto& b : cy.acc) {
+      b = take_buffer(fs + nq + 3);
+      cy.accp.push_back(b->data());
+    }
   }
   std::vector<S> mx(nc, S(0));
   team.each([&](int c) {
@@ -1450,7 +1454,7 @@ bool run(Team& team, const Shared& sh, const Call& a, Carry<S>& cy) {
     S* F = reinterpret_cast<S*>(b);
     S* T = F + D * n;
     double *Q = b + fs, *R = b + fs + nq;
-    if (!cy.zeroed) {
+    if (!cy.drifted) {  // (else zeroed by the step before's sum pass)
       std::memset(F, 0, sizeof(S) * D * n);
       std::memset(T, 0, sizeof(S) * DW * n);
       if (heat_on) std::memset(Q, 0, sizeof(double) * n);
@@ -1462,9 +1466,7 @@ bool run(Team& team, const Shared& sh, const Call& a, Carry<S>& cy) {
   for (int64_t c = 1; c < nc; ++c)
     if (mx[c] > max_ov) max_ov = mx[c];
   const Ahead<S, D> ahead(a);
-  std::vector<double*> accs;
-  for (const auto& b : cy.acc) accs.push_back(b->data());
-  const Sums<S, D> sm(lp, ahead, cy, accs, fs, ranked ? a.order : nullptr);
+  const Sums<S, D> sm(lp, ahead, cy, fs, ranked ? a.order : nullptr);
   std::vector<S> far(nc, S(0));  // each range's largest squared displacement (skin test)
   team.each([&](int cc) { far[cc] = sum_range<S, D>(sm, n*cc/nc, n*(cc + 1)/nc); });
   for (int q = 0; q < 3; ++q) {  // the loss rates, added in chunk order
@@ -1476,7 +1478,6 @@ bool run(Team& team, const Shared& sh, const Call& a, Carry<S>& cy) {
     R0[q] = r;
   }
   cy.drifted = cy.next;
-  cy.zeroed = cy.next;
   MX[0] = max_ov;
   if (ahead.on) {
     S most = S(0);

@@ -205,13 +205,13 @@ void build(ffi::ThreadPool& pool, const S* x, int64_t n, const Grid& g, int32_t*
   std::vector<Aside> aside(nt - 1);
   Team team(pool, nt);
   team.each([&](int part) {
-    const int64_t lo = n * part / nt, hi = n * (part + 1) / nt;
-    if (part == 0)
-      search<S, D>(x, lo, hi, coord.data(), count.data(), order.data(), rank.data(),
-                   shifts.data(), ns, g.cells, g.cap, few, periodic, cut2, L, list);
-    else
-      search<S, D>(x, lo, hi, coord.data(), count.data(), order.data(), rank.data(),
-                   shifts.data(), ns, g.cells, g.cap, few, periodic, cut2, L, aside[part - 1]);
+    auto into = [&](auto& sink) {
+      search<S, D>(x, n * part / nt, n * (part + 1) / nt, coord.data(), count.data(),
+                   order.data(), rank.data(), shifts.data(), ns, g.cells, g.cap, few, periodic,
+                   cut2, L, sink);
+    };
+    if (part == 0) into(list);
+    else into(aside[part - 1]);
   });
   for (Aside& a : aside) {
     for (size_t u = 0; u < a.pairs.size(); u += 2) list.add(a.pairs[u], a.pairs[u + 1]);
