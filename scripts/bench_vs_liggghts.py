@@ -28,6 +28,13 @@ Procedure for each N:
    kernel (the default, every backend) and with the C++ contact loop
    (``make_dem(pair_kernel="cpu")``, :mod:`drumheat.mechanics.cpu_kernel`) where it can be built.
 
+With ``--rounds R`` steps 2 and 3 take turns R times: drumheat times the next ``steps`` of
+its run, then LIGGGHTS its ``steps`` from the restart on each rank count, and so on. This
+machine has stretches of seconds to tens of seconds in which the same code on the same state
+runs up to 1.5x slower with no CPU steal reported (docs/performance.md, "Slow stretches");
+one long timing of each code, one after the other, lets such a stretch fall on one code only,
+rounds spread it over both, and each code's median over the rounds is then compared.
+
 Output: a table N x code x ranks with particle-steps/s and the ratio to drumheat, the machine
 load seen before each timing and the CPU steal during it (the share of CPU time a hypervisor
 gave to other guests: on a shared virtual machine a timing with much steal is slow for reasons
@@ -46,7 +53,7 @@ what is compared; the step sizes differ (LIGGGHTS 1e-5 s).
 
 Usage: python scripts/bench_vs_liggghts.py [--n 2000 10000 50000] [--steps S] [--quick]
        [--ranks 1 2] [--workdir DIR] [--packings DIR] [--no-liggghts] [--thermal on|off]
-       [--precision float64 float32 mixed] [--bespoke]
+       [--precision float64 float32 mixed] [--bespoke] [--rounds R]
 """
 
 from __future__ import annotations
@@ -153,24 +160,33 @@ def read_data(path):
     return pos, V[:, 1:4], V[:, 4:7], 0.5 * A[:, 2], zhi - zlo
 
 
-def timed_steps(dem, state, steps, warm):
-    """``warm`` steps (compilation, tangential history), then ``steps`` timed ones:
-    ``(state after the warm-up, final state, timing dict)`` with the machine's load before and
-    the CPU steal during the timing."""
-    t0 = time.perf_counter()
-    state = dem.run(state, warm, chunk=warm)
-    jax.block_until_ready(state.position)
-    t_warm = time.perf_counter() - t0
-    ld = load()
-    r0 = int(state.n_rebuilds)
-    c0 = cpu_ticks()
-    t0 = time.perf_counter()
-    out = dem.run(state, steps, chunk=steps)
-    jax.block_until_ready(out.position)
-    wall = time.perf_counter() - t0
-    steal = steal_percent(c0, cpu_ticks())
-    return state, out, dict(rate=dem.particles.n * steps / wall, wall=wall, load=ld,
-                            steal=steal, warm_s=t_warm, rebuilds=int(out.n_rebuilds) - r0)
+class StepTimer:
+    """One drumheat run being timed: ``warm`` steps at construction (compilation, tangential
+    history), then every call times the next ``steps`` steps of the same run and returns the
+    timing dict (particle-steps/s, wall s, the machine's load before and the CPU steal during
+    it, rebuilds). Successive calls continue the run, so rounds interleaved with LIGGGHTS
+    sample one long run of the drum, its phases included."""
+
+    def __init__(self, dem, state, steps, warm):
+        self.dem, self.steps = dem, steps
+        t0 = time.perf_counter()
+        self.state = dem.run(state, warm, chunk=warm)
+        jax.block_until_ready(self.state.position)
+        self.warm_s = time.perf_counter() - t0
+
+    def __call__(self):
+        dem, start = self.dem, self.state
+        ld = load()
+        c0 = cpu_ticks()
+        t0 = time.perf_counter()
+        out = dem.run(start, self.steps, chunk=self.steps)
+        jax.block_until_ready(out.position)
+        wall = time.perf_counter() - t0
+        steal = steal_percent(c0, cpu_ticks())
+        self.state = out
+        return dict(rate=dem.particles.n * self.steps / wall, wall=wall, load=ld, steal=steal,
+                    warm_s=self.warm_s, rebuilds=int(out.n_rebuilds) - int(start.n_rebuilds),
+                    start=start, end=out)
 
 
 def drumheat_setup(dat, thermal, pair_kernel="jax"):
@@ -191,15 +207,20 @@ def drumheat_setup(dat, thermal, pair_kernel="jax"):
     return dem, state
 
 
-def time_drumheat(dat, steps, warm, thermal, pair_kernel="jax"):
+def drumheat_timer(dat, steps, warm, thermal, pair_kernel="jax"):
+    """The bespoke DEM of ``drumheat_setup`` warmed up: a :class:`StepTimer` and a function of
+    a timing dict that says what the timed steps did to the heat content (conduction only:
+    round-off)."""
     dem, state = drumheat_setup(dat, thermal, pair_kernel)
-    state, out, r = timed_steps(dem, state, steps, warm)
-    extra = ""
-    if thermal:
-        e = float(jnp.sum(out.extra * dem.particles.mass * C_P)
-                  - jnp.sum(state.extra * dem.particles.mass * C_P))
-        extra = f"change of the heat content {e:.2e} J (conduction only: round-off)"
-    return dict(r, note=extra)
+
+    def note(r):
+        if not thermal:
+            return ""
+        e = float(jnp.sum(r["end"].extra * dem.particles.mass * C_P)
+                  - jnp.sum(r["start"].extra * dem.particles.mass * C_P))
+        return f"change of the heat content {e:.2e} J (conduction only: round-off)"
+
+    return StepTimer(dem, state, steps, warm), note
 
 
 def scene_for(n, backend="auto", packing=None, precision="float64"):
@@ -232,21 +253,23 @@ def scene_packing(n, folder):
     return path
 
 
-def time_scene(n, steps, warm, backend="auto", packing=None, precision="float64"):
+def scene_timer(n, steps, warm, backend="auto", packing=None, precision="float64"):
     """drumheat through the product path: the scene's motion model (``make_motion``), its
     poured initial state (or the ``packing`` file) and its DEM with the coupled heat update
-    (contact times every step, a thermal step every ``dem.thermal_substeps``), timed over
-    ``steps`` after ``warm``, the mechanics in ``precision``."""
+    (contact times every step, a thermal step every ``dem.thermal_substeps``), the mechanics in
+    ``precision``, warmed up: a :class:`StepTimer`, the backend that ran and a function of a
+    timing dict giving the row's note."""
     from drumheat.motion import make_motion
 
     t0 = time.perf_counter()
     motion = make_motion(scene_for(n, backend, packing, precision))
     state = motion.initial_state()  # pours the bed unless given a packing (not timed)
     t_setup = time.perf_counter() - t0
-    _, _, r = timed_steps(motion.dem, state, steps, warm)
+    timer = StepTimer(motion.dem, state, steps, warm)
     backend = motion.contact_backend().backend
-    return dict(r, backend=backend, note=f"scene path, backend {backend}, set-up "
-                                         f"{t_setup:.0f} s, warm-up {r['warm_s']:.0f} s")
+    note = (f"scene path, backend {backend}, set-up {t_setup:.0f} s, warm-up "
+            f"{timer.warm_s:.0f} s")
+    return timer, backend, lambda r: note
 
 
 def time_liggghts(rst, work, n, steps, warm, ranks, thermal):
@@ -274,6 +297,11 @@ def main():
     ap.add_argument("--warm", type=int, default=None, help="warm-up steps (both codes)")
     ap.add_argument("--quick", action="store_true", help="N = 2000 only, 3000 timed steps")
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--rounds", type=int, default=1,
+                    help="time each code this many times, the codes taking turns (drumheat "
+                         "continuing its run, LIGGGHTS from its restart each time), and add "
+                         "each code's median: a slow stretch of the machine that the steal "
+                         "does not show then falls on both codes alike")
     ap.add_argument("--thermal", default="on", choices=["on", "off"])
     ap.add_argument("--workdir", default="/tmp/drumheat_vs_liggghts")
     ap.add_argument("--prep-ranks", type=int, default=2)
@@ -314,26 +342,23 @@ def main():
             f"the scene's mechanics in {' and '.join(args.precision)}, float64 temperatures")
     print(f"jax {jax.__version__} on {jax.devices()[0].platform}; drumheat {mech}; heat "
           f"conduction {args.thermal}; {os.cpu_count()} CPUs")
-    rows = []
+    rows = []  # (N, code, ranks, timed steps, round, timing dict)
     for n in sizes:
         steps, warm = DEFAULT_STEPS.get(n, (max(1000, 2 * 10**7 // n), 500))
         if args.quick:
             steps, warm = 3000, 500
         steps = args.steps or steps
         warm = args.warm or warm
+        timers = []  # (code, StepTimer, note of a timing)
         if not args.bespoke:  # the product path: the built-in scene, each backend
             packing = scene_packing(n, args.packings)
             for kernel, precision in itertools.product(args.pair_kernel, args.precision):
-                r = time_scene(n, steps, warm, kernel, packing, precision)
-                code = f"drumheat scene ({r['backend']}, {precision})"
-                rows.append((n, code, "-", steps, r))
-                print(f"  N={n} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
-                      f"{r['load']:.2f}, steal {r['steal']:.0f} %, rebuilds {r['rebuilds']}) "
-                      f"{r['note']}", flush=True)
+                timer, backend, note = scene_timer(n, steps, warm, kernel, packing, precision)
+                timers.append((f"drumheat scene ({backend}, {precision})", timer, note))
         if have_lig:
             rst, dat = prepare(n, work, args.prep_ranks)
         elif not args.bespoke:
-            continue
+            rst = None
         else:
             rst, dat = None, work / f"restart/drum_N{n}.data"
             if not dat.exists():
@@ -343,28 +368,66 @@ def main():
             if kernel == "cpu" and not cpu_kernel.available()[0]:
                 print(f"  C++ contact kernel unavailable: {cpu_kernel.available()[1]}")
                 continue
-            r = time_drumheat(dat, steps, warm, thermal, kernel)
-            code = f"drumheat ({'JAX' if kernel == 'jax' else 'C++'} kernel)"
-            rows.append((n, code, "-", steps, r))
-            print(f"  N={n} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load "
-                  f"{r['load']:.2f}, steal {r['steal']:.0f} %, rebuilds {r['rebuilds']}) "
-                  f"{r['note']}", flush=True)
-        if have_lig and not args.no_liggghts:
-            for k in args.ranks:
-                r = time_liggghts(rst, work, n, steps, warm, k, args.thermal)
-                rows.append((n, "LIGGGHTS", str(k), steps, r))
-                print(f"  N={n} LIGGGHTS {k} rank(s): {r['rate']:.3g} p-steps/s "
-                      f"({r['wall']:.1f} s, load {r['load']:.2f}, steal {r['steal']:.0f} %)",
-                      flush=True)
-    print()
-    print("| N | code | ranks | timed steps | wall s | particle-steps/s | rate / drumheat "
-          "| load before | CPU steal % |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for n, code, ranks, steps, r in rows:
-        ref = next(x[4]["rate"] for x in rows if x[0] == n and x[1].startswith("drumheat"))
-        print(f"| {n} | {code} | {ranks} | {steps} | {r['wall']:.2f} | {r['rate']:.3g} | "
-              f"{r['rate'] / ref:.2f} | {r['load']:.2f} | {r['steal']:.0f} |")
+            timer, note = drumheat_timer(dat, steps, warm, thermal, kernel)
+            timers.append((f"drumheat ({'JAX' if kernel == 'jax' else 'C++'} kernel)", timer,
+                           note))
+        for rnd in range(args.rounds):
+            tag = f" round {rnd + 1}/{args.rounds}" if args.rounds > 1 else ""
+            for code, timer, note in timers:
+                r = timer()
+                r["note"] = note(r)
+                del r["start"], r["end"]  # the states: not kept across the rounds
+                rows.append((n, code, "-", steps, rnd, r))
+                print(f"  N={n}{tag} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, "
+                      f"load {r['load']:.2f}, steal {r['steal']:.0f} %, rebuilds "
+                      f"{r['rebuilds']}) {r['note']}", flush=True)
+            if rst is not None and not args.no_liggghts:
+                for k in args.ranks:
+                    r = time_liggghts(rst, work, n, steps, warm, k, args.thermal)
+                    rows.append((n, "LIGGGHTS", str(k), steps, rnd, r))
+                    print(f"  N={n}{tag} LIGGGHTS {k} rank(s): {r['rate']:.3g} p-steps/s "
+                          f"({r['wall']:.1f} s, load {r['load']:.2f}, steal "
+                          f"{r['steal']:.0f} %)", flush=True)
+    print_tables(rows, args.rounds)
 
+
+def print_tables(rows, rounds):
+    """The timings as Markdown: every timing (with its round where there were several), and
+    with several rounds the median of each code's rounds with their range, drumheat's median
+    (the first drumheat code of each N) over each code's, and the range of that ratio taken
+    within each round."""
+    print()
+    print("| N | code | ranks | round | timed steps | wall s | particle-steps/s | rate / drumheat "
+          "| load before | CPU steal % |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+
+    def ref_of(n, rnd):
+        return next(x[5]["rate"] for x in rows
+                    if x[0] == n and x[4] == rnd and x[1].startswith("drumheat"))
+
+    for n, code, ranks, steps, rnd, r in rows:
+        print(f"| {n} | {code} | {ranks} | {rnd + 1} | {steps} | {r['wall']:.2f} | "
+              f"{r['rate']:.3g} | {r['rate'] / ref_of(n, rnd):.2f} | {r['load']:.2f} | "
+              f"{r['steal']:.0f} |")
+    if rounds < 2:
+        return
+    print()
+    print(f"Over the {rounds} rounds (each code's median and range; drumheat / it: drumheat's "
+          "median over this code's, and the range of the same ratio within one round):")
+    print()
+    print("| N | code | ranks | median particle-steps/s | min - max | drumheat / it | "
+          "drumheat / it per round, min - max | CPU steal % max |")
+    print("|---|---|---|---|---|---|---|---|")
+    codes = list(dict.fromkeys((x[0], x[1], x[2]) for x in rows))
+    for n, code, ranks in codes:
+        mine = [x for x in rows if x[:3] == (n, code, ranks)]
+        rates = np.array([x[5]["rate"] for x in mine])
+        ref = [x for x in rows if x[0] == n and x[1].startswith("drumheat")]
+        ref_med = np.median([x[5]["rate"] for x in ref if x[1] == ref[0][1]])
+        per_round = [ref_of(n, x[4]) / x[5]["rate"] for x in mine]
+        print(f"| {n} | {code} | {ranks} | {np.median(rates):.3g} | {rates.min():.3g} - "
+              f"{rates.max():.3g} | {ref_med / np.median(rates):.2f} | {min(per_round):.2f} - "
+              f"{max(per_round):.2f} | {max(x[5]['steal'] for x in mine):.0f} |")
 
 if __name__ == "__main__":
     main()
