@@ -83,3 +83,27 @@ def test_the_step_loop_copies_no_pair_buffer():
         copies = [line.strip() for c in _called(comps, body, set()) for line in comps[c]
                   if " copy(" in line and re.search(rf"\b{m}\b", line.split(" copy(")[0])]
         assert not copies, copies
+
+
+def _custom_calls(backend: str) -> set:
+    """The custom-call targets in the scene's chunk (``DEM._run_steps``: runs of steps between
+    neighbour rebuilds, the rebuilds, the coupled heat) on ``backend``, lowered to StableHLO,
+    before any platform's compiler has seen it."""
+    s = dh.load_scene("glass-drum-3d", {"groups.0.count": 150, "drum.depth": 0.026,
+                                        "dem.contact_backend": backend})
+    motion = make_motion(s)
+    assert motion.contact_backend().backend == backend
+    text = motion.dem._run_steps.lower(motion.initial_state(),
+                                       jnp.asarray(10, jnp.int32)).as_text()
+    return set(re.findall(r"custom_call @([\w$.]+)", text))
+
+
+def test_the_jax_chunk_has_no_host_round_trip():
+    """On the JAX backend (what a GPU runs: the C++ loop is the CPU's) the scene's whole chunk
+    is XLA operations: no host callback and no native call in it, so on a GPU its steps,
+    rebuilds and thermal steps stay on the device and the host waits once per chunk, not per
+    step (issue 17: "nothing that would be slow on a GPU: host round-trips per step"). The C++
+    backend's chunk, which does call out, shows that the check sees a call."""
+    assert _custom_calls("jax") == set()
+    if cpu_kernel.available()[0]:
+        assert _custom_calls("cpu")  # the C++ contact loop is a custom call
