@@ -31,9 +31,10 @@ Procedure for each N:
 With ``--rounds R`` steps 2 and 3 take turns R times: drumheat times the next ``steps`` of
 its run, then LIGGGHTS its ``steps`` from the restart on each rank count, and so on. This
 machine has stretches of seconds to tens of seconds in which the same code on the same state
-runs up to 1.5x slower with no CPU steal reported (docs/performance.md, "Slow stretches");
-one long timing of each code, one after the other, lets such a stretch fall on one code only,
-rounds spread it over both, and each code's median over the rounds is then compared.
+runs 1.5x slower or more with no CPU steal reported (docs/performance.md, "Slow stretches"):
+one timing of each code, one after the other, lets such a stretch fall on the whole of one
+code's timing; with rounds it falls on some rounds of either code, and each code's median
+over the rounds, which leaves those rounds out while fewer than half are hit, is compared.
 
 Output: a table N x code x ranks with particle-steps/s and the ratio to drumheat, the machine
 load seen before each timing and the CPU steal during it (the share of CPU time a hypervisor
@@ -301,7 +302,8 @@ def main():
                     help="time each code this many times, the codes taking turns (drumheat "
                          "continuing its run, LIGGGHTS from its restart each time), and add "
                          "each code's median: a slow stretch of the machine that the steal "
-                         "does not show then falls on both codes alike")
+                         "does not show then falls on some rounds of either code, which the "
+                         "medians leave out")
     ap.add_argument("--thermal", default="on", choices=["on", "off"])
     ap.add_argument("--workdir", default="/tmp/drumheat_vs_liggghts")
     ap.add_argument("--prep-ranks", type=int, default=2)
