@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from machine import cpu_ticks, steal_percent  # scripts/machine.py
+from machine import cpu_ticks, print_table, steal_percent  # scripts/machine.py
 
 
 def probe(out: str, seconds: float) -> None:
@@ -73,8 +73,7 @@ def main() -> None:
         t_first = min(np.load(o)[0, 0] for o in outs)
         print(f"{len(cpus)} cores, {args.seconds:.0f} s, CPU steal over the probe {steal:.1f} %")
         print()
-        print("| core | units | median ms | p10 - p90 ms | median of each stretch / overall median |")
-        print("|---|---|---|---|---|")
+        rows = []
         for c, o in zip(cpus, outs):
             d = np.load(o)
             t = d[:, 1] * 1e3
@@ -82,8 +81,10 @@ def main() -> None:
             k = ((d[:, 0] - t_first) // args.bin).astype(int)
             prof = " ".join(f"{np.median(t[k == i]) / med:.2f}" for i in np.unique(k))
             p10, p90 = np.percentile(t, [10, 90])
-            print(f"| {c} | {len(t)} | {med:.2f} | {p10:.2f} - {p90:.2f} | {prof} |")
-
+            rows.append((c, len(t), med, f"{p10:.2f} - {p90:.2f}", prof))
+        print_table(["core", "units", "median ms", "p10 - p90 ms",
+                     "median of each stretch / overall median"], rows,
+                    ["d", "d", ".2f", "s", "s"])
 
 if __name__ == "__main__":
     main()

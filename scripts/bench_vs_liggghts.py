@@ -74,7 +74,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import drumheat  # noqa: F401  (x64 for the temperatures)
-from machine import cpu_ticks, load, steal_percent  # noqa: E402  (scripts/machine.py)
+from machine import cpu_ticks, load, print_table, steal_percent  # noqa: E402  (scripts/machine.py)
 from drumheat.geometry import DrumShell
 from drumheat.mechanics import contact_params, cpu_kernel, make_dem, make_particles
 from drumheat.mechanics.conduction import PairConduction
@@ -163,10 +163,10 @@ def read_data(path):
 
 class StepTimer:
     """One drumheat run being timed: ``warm`` steps at construction (compilation, tangential
-    history), then every call times the next ``steps`` steps of the same run and returns the
-    timing dict (particle-steps/s, wall s, the machine's load before and the CPU steal during
-    it, rebuilds). Successive calls continue the run, so rounds interleaved with LIGGGHTS
-    sample one long run of the drum, its phases included."""
+    history), then every call times the next ``steps`` steps of the same run and returns
+    ``(state before, state after, timing dict)``: particle-steps/s, wall s, the machine's load
+    before and the CPU steal during it, rebuilds. Successive calls continue the run, so rounds
+    interleaved with LIGGGHTS sample one long run of the drum, its phases included."""
 
     def __init__(self, dem, state, steps, warm):
         self.dem, self.steps = dem, steps
@@ -185,9 +185,9 @@ class StepTimer:
         wall = time.perf_counter() - t0
         steal = steal_percent(c0, cpu_ticks())
         self.state = out
-        return dict(rate=dem.particles.n * self.steps / wall, wall=wall, load=ld, steal=steal,
-                    warm_s=self.warm_s, rebuilds=int(out.n_rebuilds) - int(start.n_rebuilds),
-                    start=start, end=out)
+        return start, out, dict(rate=dem.particles.n * self.steps / wall, wall=wall, load=ld,
+                                steal=steal,
+                                rebuilds=int(out.n_rebuilds) - int(start.n_rebuilds))
 
 
 def drumheat_setup(dat, thermal, pair_kernel="jax"):
@@ -210,15 +210,15 @@ def drumheat_setup(dat, thermal, pair_kernel="jax"):
 
 def drumheat_timer(dat, steps, warm, thermal, pair_kernel="jax"):
     """The bespoke DEM of ``drumheat_setup`` warmed up: a :class:`StepTimer` and a function of
-    a timing dict that says what the timed steps did to the heat content (conduction only:
-    round-off)."""
+    the timed steps' first and last state that says what they did to the heat content
+    (conduction only: round-off)."""
     dem, state = drumheat_setup(dat, thermal, pair_kernel)
 
-    def note(r):
+    def note(start, end):
         if not thermal:
             return ""
-        e = float(jnp.sum(r["end"].extra * dem.particles.mass * C_P)
-                  - jnp.sum(r["start"].extra * dem.particles.mass * C_P))
+        e = float(jnp.sum(end.extra * dem.particles.mass * C_P)
+                  - jnp.sum(start.extra * dem.particles.mass * C_P))
         return f"change of the heat content {e:.2e} J (conduction only: round-off)"
 
     return StepTimer(dem, state, steps, warm), note
@@ -258,8 +258,8 @@ def scene_timer(n, steps, warm, backend="auto", packing=None, precision="float64
     """drumheat through the product path: the scene's motion model (``make_motion``), its
     poured initial state (or the ``packing`` file) and its DEM with the coupled heat update
     (contact times every step, a thermal step every ``dem.thermal_substeps``), the mechanics in
-    ``precision``, warmed up: a :class:`StepTimer`, the backend that ran and a function of a
-    timing dict giving the row's note."""
+    ``precision``, warmed up: a :class:`StepTimer`, the backend that ran and a function of the
+    timed steps' first and last state giving the row's note."""
     from drumheat.motion import make_motion
 
     t0 = time.perf_counter()
@@ -270,7 +270,7 @@ def scene_timer(n, steps, warm, backend="auto", packing=None, precision="float64
     backend = motion.contact_backend().backend
     note = (f"scene path, backend {backend}, set-up {t_setup:.0f} s, warm-up "
             f"{timer.warm_s:.0f} s")
-    return timer, backend, lambda r: note
+    return timer, backend, lambda start, end: note
 
 
 def time_liggghts(rst, work, n, steps, warm, ranks, thermal):
@@ -376,21 +376,23 @@ def main():
         for rnd in range(args.rounds):
             tag = f" round {rnd + 1}/{args.rounds}" if args.rounds > 1 else ""
             for code, timer, note in timers:
-                r = timer()
-                r["note"] = note(r)
-                del r["start"], r["end"]  # the states: not kept across the rounds
+                start, end, r = timer()
+                r["note"] = ", ".join(filter(None, (f"rebuilds {r['rebuilds']}",
+                                                    note(start, end))))
                 rows.append((n, code, "-", steps, rnd, r))
-                print(f"  N={n}{tag} {code}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, "
-                      f"load {r['load']:.2f}, steal {r['steal']:.0f} %, rebuilds "
-                      f"{r['rebuilds']}) {r['note']}", flush=True)
+                say(f"N={n}{tag} {code}", r)
             if rst is not None and not args.no_liggghts:
                 for k in args.ranks:
                     r = time_liggghts(rst, work, n, steps, warm, k, args.thermal)
                     rows.append((n, "LIGGGHTS", str(k), steps, rnd, r))
-                    print(f"  N={n}{tag} LIGGGHTS {k} rank(s): {r['rate']:.3g} p-steps/s "
-                          f"({r['wall']:.1f} s, load {r['load']:.2f}, steal "
-                          f"{r['steal']:.0f} %)", flush=True)
+                    say(f"N={n}{tag} LIGGGHTS {k} rank(s)", r)
     print_tables(rows, args.rounds)
+
+
+def say(what, r):
+    """One timing as it is made: its rate, wall time, load, steal and note."""
+    print(f"  {what}: {r['rate']:.3g} p-steps/s ({r['wall']:.1f} s, load {r['load']:.2f}, "
+          f"steal {r['steal']:.0f} %) {r['note']}", flush=True)
 
 
 def print_tables(rows, rounds):
@@ -398,38 +400,37 @@ def print_tables(rows, rounds):
     with several rounds the median of each code's rounds with their range, drumheat's median
     (the first drumheat code of each N) over each code's, and the range of that ratio taken
     within each round."""
-    print()
-    print("| N | code | ranks | round | timed steps | wall s | particle-steps/s | rate / drumheat "
-          "| load before | CPU steal % |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-
     def ref_of(n, rnd):
         return next(x[5]["rate"] for x in rows
                     if x[0] == n and x[4] == rnd and x[1].startswith("drumheat"))
 
-    for n, code, ranks, steps, rnd, r in rows:
-        print(f"| {n} | {code} | {ranks} | {rnd + 1} | {steps} | {r['wall']:.2f} | "
-              f"{r['rate']:.3g} | {r['rate'] / ref_of(n, rnd):.2f} | {r['load']:.2f} | "
-              f"{r['steal']:.0f} |")
+    print()
+    print_table(["N", "code", "ranks", "round", "timed steps", "wall s", "particle-steps/s",
+                 "rate / drumheat", "load before", "CPU steal %"],
+                [(n, code, ranks, rnd + 1, steps, r["wall"], r["rate"],
+                  r["rate"] / ref_of(n, rnd), r["load"], r["steal"])
+                 for n, code, ranks, steps, rnd, r in rows],
+                ["d", "s", "s", "d", "d", ".2f", ".3g", ".2f", ".2f", ".0f"])
     if rounds < 2:
         return
     print()
     print(f"Over the {rounds} rounds (each code's median and range; drumheat / it: drumheat's "
           "median over this code's, and the range of the same ratio within one round):")
     print()
-    print("| N | code | ranks | median particle-steps/s | min - max | drumheat / it | "
-          "drumheat / it per round, min - max | CPU steal % max |")
-    print("|---|---|---|---|---|---|---|---|")
-    codes = list(dict.fromkeys((x[0], x[1], x[2]) for x in rows))
-    for n, code, ranks in codes:
-        mine = [x for x in rows if x[:3] == (n, code, ranks)]
+    table = []
+    for key in dict.fromkeys(x[:3] for x in rows):
+        n = key[0]
+        mine = [x for x in rows if x[:3] == key]
+        ref = next(x[:3] for x in rows if x[0] == n and x[1].startswith("drumheat"))
+        ref_med = np.median([x[5]["rate"] for x in rows if x[:3] == ref])
         rates = np.array([x[5]["rate"] for x in mine])
-        ref = [x for x in rows if x[0] == n and x[1].startswith("drumheat")]
-        ref_med = np.median([x[5]["rate"] for x in ref if x[1] == ref[0][1]])
         per_round = [ref_of(n, x[4]) / x[5]["rate"] for x in mine]
-        print(f"| {n} | {code} | {ranks} | {np.median(rates):.3g} | {rates.min():.3g} - "
-              f"{rates.max():.3g} | {ref_med / np.median(rates):.2f} | {min(per_round):.2f} - "
-              f"{max(per_round):.2f} | {max(x[5]['steal'] for x in mine):.0f} |")
+        table.append((*key, np.median(rates), f"{rates.min():.3g} - {rates.max():.3g}",
+                      ref_med / np.median(rates), f"{min(per_round):.2f} - {max(per_round):.2f}",
+                      max(x[5]["steal"] for x in mine)))
+    print_table(["N", "code", "ranks", "median particle-steps/s", "min - max", "drumheat / it",
+                 "drumheat / it per round, min - max", "CPU steal % max"], table,
+                ["d", "s", "s", ".3g", "s", ".2f", "s", ".0f"])
 
 if __name__ == "__main__":
     main()
