@@ -15,9 +15,11 @@ import math
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.devices import to_device
 from drumheat.geometry.hopper import HopperGeometry, hopper_walls
 from drumheat.geometry.walls import DrumShell, InnerCylinder, Plane, RadialPlate
 from drumheat.materials import gas as gas_library
@@ -86,11 +88,19 @@ def group_property(scene: Scene, value: ValueFn, k: int, prop: str):
     return getattr(material(g.material), prop)
 
 
+def _per_particle(values, group):
+    """The per-group ``values`` (a list, one per group) of every particle, shape (N,) float:
+    on the host where no value is traced (eager jnp operations would each compile a program,
+    :func:`drumheat.devices.to_device`), else in jnp (a fit's traced parameters)."""
+    if any(isinstance(v, jax.core.Tracer) for v in values):
+        return jnp.stack([jnp.asarray(v, float) for v in values])[group]
+    return np.stack([np.asarray(v, float) for v in values])[group]
+
+
 def particle_property(scene: Scene, value: ValueFn, prop: str):
     """A material property of every particle, shape (N,) (:func:`group_property` per group)."""
-    per_group = jnp.stack([jnp.asarray(group_property(scene, value, k, prop), float)
-                           for k in range(len(scene.groups))])
-    return per_group[group_index(scene)]
+    return to_device(_per_particle([group_property(scene, value, k, prop)
+                                    for k in range(len(scene.groups))], group_index(scene)))
 
 
 def thermal_particles(scene: Scene, value: ValueFn) -> ThermalParticles:
@@ -99,20 +109,22 @@ def thermal_particles(scene: Scene, value: ValueFn) -> ThermalParticles:
     density, i.e. mass and heat capacity ``s^3`` times a particle's (the ``s^3`` particles a
     parcel stands for; docs/models/coarse-graining.md)."""
     group = group_index(scene)
-    per_group = lambda f: jnp.stack([jnp.asarray(f(k), float) for k in range(len(scene.groups))])
-    diameter = per_group(lambda k: value(f"groups.{k}.diameter"))[group]
+
+    def per_group(f):
+        return _per_particle([f(k) for k in range(len(scene.groups))], group)
+
+    diameter = per_group(lambda k: value(f"groups.{k}.diameter"))
     if scene.coarse_grain != 1.0:
         diameter = scene.coarse_grain * diameter
-    density = per_group(lambda k: group_property(scene, value, k, "density"))[group]
-    c = per_group(lambda k: group_property(scene, value, k, "heat_capacity"))[group]
+    density = per_group(lambda k: group_property(scene, value, k, "density"))
+    c = per_group(lambda k: group_property(scene, value, k, "heat_capacity"))
     return ThermalParticles.spheres(diameter, density, c)
 
 
 def initial_temperatures(scene: Scene, value: ValueFn):
     """Initial temperature of every particle, K, shape (N,)."""
-    T = jnp.stack([jnp.asarray(value(f"groups.{k}.temperature"), float)
-                   for k in range(len(scene.groups))])
-    return T[group_index(scene)]
+    return to_device(_per_particle([value(f"groups.{k}.temperature")
+                                    for k in range(len(scene.groups))], group_index(scene)))
 
 
 def output_times(scene: Scene) -> np.ndarray:
@@ -203,7 +215,7 @@ def drum_wall_temperatures(scene: Scene, value: ValueFn):
     surfaces = scene.drum.heated_surfaces() if scene.drum is not None else ()
     if not surfaces:
         return None, None
-    temps = jnp.stack([jnp.asarray(value(key), float) for _, key in surfaces])
+    temps = to_device([value(key) for _, key in surfaces], float)
     names = None if not scene.drum.has_internals else tuple(s for s, _ in surfaces)
     return temps, names
 

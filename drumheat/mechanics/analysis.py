@@ -360,20 +360,25 @@ def count_interfraction_contacts(pairs_i, pairs_j, mask, group, fractions=None):
 
     Returns
     -------
-    jax.Array of int, shape (...)
-        Number of inter-fraction contacts.
+    array of int, shape (...)
+        Number of inter-fraction contacts: a jax.Array where an input is one (or traced), a
+        numpy array for numpy or list inputs (counted on the host: the same counts, without
+        the compiled program per operation and pair count that eager jnp would make,
+        :func:`drumheat.devices.to_device`).
     """
-    group = jnp.asarray(group)
+    inputs = (pairs_i, pairs_j, mask, group)
+    xp = jnp if any(isinstance(a, jax.Array) for a in inputs) else np
+    group = xp.asarray(group)
     n = group.shape[0]
-    i = jnp.asarray(pairs_i)
-    j = jnp.asarray(pairs_j)
+    i = xp.asarray(pairs_i)
+    j = xp.asarray(pairs_j)
     in_range = (i >= 0) & (i < n) & (j >= 0) & (j < n)
-    valid = in_range if mask is None else (jnp.asarray(mask).astype(bool) & in_range)
-    gi = group[jnp.clip(i, 0, n - 1)]
-    gj = group[jnp.clip(j, 0, n - 1)]
+    valid = in_range if mask is None else (xp.asarray(mask).astype(bool) & in_range)
+    gi = group[xp.clip(i, 0, n - 1)]
+    gj = group[xp.clip(j, 0, n - 1)]
     if fractions is None:
         between = gi != gj
     else:
         a, b = fractions
         between = ((gi == a) & (gj == b)) | ((gi == b) & (gj == a))
-    return jnp.sum(valid & between, axis=-1)
+    return xp.sum(valid & between, axis=-1)

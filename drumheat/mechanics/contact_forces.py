@@ -38,6 +38,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from drumheat.devices import to_device
 from drumheat.models.soft_sphere import (  # noqa: F401
     critical_time_step, dashpot_time_step, normal_stiffness_from_youngs)
 
@@ -222,15 +224,15 @@ def contact_params(
 
     def pp(v):
         a = np.asarray(v, dtype=float)
-        return jnp.asarray(np.broadcast_to(a, (T, T)).copy())
+        return to_device(np.broadcast_to(a, (T, T)).copy())
 
     def pw(v):
         a = np.asarray(v, dtype=float)
         if a.ndim == 2:
-            return jnp.asarray(np.broadcast_to(a, (T, a.shape[1])).copy())
+            return to_device(np.broadcast_to(a, (T, a.shape[1])).copy())
         if a.ndim == 1:  # per wall
-            return jnp.asarray(np.broadcast_to(a[None, :], (T, a.size)).copy())
-        return jnp.asarray(np.full((T, 1), float(a)))
+            return to_device(np.broadcast_to(a[None, :], (T, a.size)).copy())
+        return to_device(np.full((T, 1), float(a)))
 
     def zeta_of(e, z):
         if e is not None and z is not None:

@@ -76,6 +76,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from drumheat.devices import to_device
 from drumheat.environment import cache_dir_setting
 
 __all__ = ["TARGET", "HEAT_TARGET", "NEIGHBOR_TARGET", "TAKE_TARGET", "COUNT_CONDUCTION_TARGET",
@@ -281,7 +282,7 @@ def shared_value(values):
     :func:`uniform_or_all`)."""
     a = np.asarray(values)
     if a.size > 1 and np.all(a == a.reshape(-1)[0]):
-        return jnp.asarray(a.reshape(-1)[0], dtype=a.dtype)
+        return to_device(a.reshape(-1)[0])
     return values
 
 
@@ -289,8 +290,10 @@ def uniform_or_all(values):
     """``values`` (a concrete per-particle array) as :func:`contacts` may take it: the one
     value, shape (1,), where all particles share it (:func:`shared_value`), else the array as
     it is."""
-    v = shared_value(values)
-    return v.reshape(1) if v is not values else values
+    a = np.asarray(values)
+    if a.size > 1 and np.all(a == a.reshape(-1)[0]):
+        return to_device(a.reshape(-1)[:1])
+    return values
 
 
 def kernel_params(params, n_walls, dtype, dt, wall_omega, periodic_length=None,
@@ -485,7 +488,7 @@ def skin_test_constants(dt, inv_mass, periodic_length, lo, dtype):
     L = one(periodic_length or 0.0)
     vals = [_half_kick(dt, inv_mass, dtype), one(dt), L, one(1.0) / L if L else one(0.0),
             *np.asarray(lo, dtype)]
-    return jnp.asarray(np.array(vals, dtype))
+    return to_device(np.array(vals, dtype))
 
 
 def _half_kick(dt, inverse, dtype):

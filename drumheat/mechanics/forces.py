@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.devices import to_device
 from drumheat.geometry.walls import DrumShell, rpm_to_omega
 from drumheat.mechanics.conduction import PairConduction
 from drumheat.mechanics.conduction import heat_flow as pair_heat_flow
@@ -202,18 +203,19 @@ class ContactForces:
         # folded along the periodic axis to this period (pair_positions), and ``displacement``
         # takes the minimum image in it
         self.fold_length = fold_length
-        self.radius = particles.radius.astype(dtype)
-        self.mass = particles.mass.astype(dtype)
-        self.inertia = particles.inertia.astype(dtype)
+        # made on the host (drumheat.devices.to_device: no compiled program each)
+        self.radius = to_device(particles.radius, dtype)
+        self.mass = to_device(particles.mass, dtype)
+        self.inertia = to_device(particles.inertia, dtype)
         self.ptype = particles.ptype
         self.radius_thermal = particles.radius  # the conduction's own precision
         self.single_type = params.n_types == 1
         self.use_rolling = params.uses_rolling()
-        self.g_vec = jnp.asarray(gravity, dtype)
+        self.g_vec = to_device(gravity, dtype)
         self.displacement = displacement
         self.wall_ids = np.array([w.wall_id for w in self.walls], dtype=np.int32)
         self.wall_omega = [rpm_to_omega(getattr(w, "rpm", 0.0)) for w in self.walls]
-        self.dt, self.dt_c = dt, jnp.asarray(dt, dtype)
+        self.dt, self.dt_c = dt, to_device(dt, dtype)
         self.conduction = conduction
         self.gap_pp, self.gap_pw = conduction_gap
         self.periodic_length = periodic_length
@@ -599,11 +601,11 @@ class CpuContactForces(ContactForces):
         # anew every step), the types not at all with one type
         self._kernel_particles = (
             *(cpu_kernel.uniform_or_all(a) for a in (self.radius, self.mass, self.inertia)),
-            self.ptype if self.params.n_types > 1 else jnp.zeros((1,), jnp.int32))
+            self.ptype if self.params.n_types > 1 else to_device(np.zeros(1, np.int32)))
         # gravity as the loop adds it to each particle's force last, one row where all
-        # particles share the mass
+        # particles share the mass (:meth:`gravity`, multiplied on the host)
         _, m, inertia, _ = self._kernel_particles
-        self._body_force = self.gravity(m)
+        self._body_force = to_device(np.asarray(m)[:, None] * np.asarray(self.g_vec))
         # the coming step's skin test in the loop: its kick c F takes one mass for all
         self.looks_ahead = m.shape == (1,)
         self.shell = _shell_of(self.walls, self.friction_heat)

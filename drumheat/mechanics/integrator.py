@@ -55,6 +55,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.devices import device_copy, to_device
 from drumheat.geometry.walls import expand_walls, wall_bounds
 from drumheat.mechanics.contact_forces import ContactParams, critical_time_step
 from drumheat.mechanics.cpu_kernel import drift_constants, shared_value, skin_test_constants
@@ -117,8 +118,8 @@ def make_particles(radius, density, ptype=None, group=None) -> Particles:
     n = r.size
     pt = np.zeros(n, int) if ptype is None else np.asarray(ptype, int).reshape(-1)
     gr = np.zeros(n, int) if group is None else np.asarray(group, int).reshape(-1)
-    return Particles(jnp.asarray(r), jnp.asarray(m), jnp.asarray(0.4 * m * r * r),
-                     jnp.asarray(pt, dtype=jnp.int32), jnp.asarray(gr, dtype=jnp.int32))
+    return Particles(to_device(r), to_device(m), to_device(0.4 * m * r * r),
+                     to_device(pt, jnp.int32), to_device(gr, jnp.int32))
 
 
 class DEMState(NamedTuple):
@@ -155,6 +156,12 @@ class DEMState(NamedTuple):
 # CPU time per step (3.2 vs 1.6 ms). Per-executable, so nothing else in the process changes;
 # GPU backends ignore the option.
 JIT_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+
+
+@partial(jax.jit, static_argnums=1)
+def _wrapped(pos, periodic_length):
+    """:func:`wrap_periodic_axis` of a set-up's positions as one compiled program."""
+    return wrap_periodic_axis(pos, periodic_length)
 
 
 def wrap_periodic_axis(pos, periodic_length, near: bool = False):
@@ -358,16 +365,20 @@ class DEM:
         (``capacity_multiplier``), or that head room on the current pairs if they are more.
         Overflows are handled by :meth:`run` in any case (reallocation and redo).
         """
+        # the arrays made on the host and put on the device: eager jnp operations would each
+        # compile a program that stays in memory (drumheat.devices.to_device)
         dt_ = self.dtype
         n = self.particles.n
-        pos = jnp.asarray(position, dtype=self.position_dtype or dt_)
+        zeros = lambda shape: to_device(np.zeros(shape, dt_))  # noqa: E731
+        pos = to_device(position, self.position_dtype or dt_)
         if pos.shape != (n, self.dim):
             raise ValueError(f"position must have shape ({n}, {self.dim}), got {pos.shape}")
-        pos = self._wrap(pos)
-        vel = jnp.zeros(pos.shape, dt_) if velocity is None else jnp.asarray(velocity, dt_)
+        if self.neighbor.periodic_length is not None:
+            pos = _wrapped(pos, self.neighbor.periodic_length)
+        vel = zeros(pos.shape) if velocity is None else to_device(velocity, dt_)
         wshape = (n,) if self.dim == 2 else (n, 3)
-        w = (jnp.zeros(wshape, dt_) if angular_velocity is None
-             else jnp.asarray(angular_velocity, dt_).reshape(wshape))
+        w = (zeros(wshape) if angular_velocity is None
+             else to_device(np.reshape(angular_velocity, wshape), dt_))
         # floor: the pairs of a dense bed, so that a dilute start (a poured grid) does not size
         # the buffer for itself; a dense start sizes it from its own pairs
         if pair_capacity is None:
@@ -379,12 +390,12 @@ class DEM:
         n_w = len(self.walls)
         state = DEMState(
             position=pos, velocity=vel, angular_velocity=w,
-            force=jnp.zeros(pos.shape, dt_), torque=jnp.zeros(wshape, dt_),
-            time=jnp.asarray(time, dtype=jnp.float64 if jax.config.jax_enable_x64 else dt_),
-            step=jnp.asarray(0, jnp.int32), nbrs=nbrs,
-            pair_spring=jnp.zeros((cap, self.dim), dt_),
-            wall_spring=jnp.zeros((n, n_w, self.dim), dt_),
-            n_rebuilds=jnp.asarray(0, jnp.int32), max_overlap=jnp.asarray(0.0, dt_),
+            force=zeros(pos.shape), torque=zeros(wshape),
+            time=to_device(time, jnp.float64 if jax.config.jax_enable_x64 else dt_),
+            step=to_device(0, jnp.int32), nbrs=nbrs,
+            pair_spring=zeros((cap, self.dim)),
+            wall_spring=zeros((n, n_w, self.dim)),
+            n_rebuilds=to_device(0, jnp.int32), max_overlap=to_device(0.0, dt_),
             extra=self._check_temperature(extra),
         )
         res = self._forces(state.position, state.velocity, state.angular_velocity, state.time,
@@ -402,10 +413,7 @@ class DEM:
         if extra is None or np.shape(extra) != (n,):
             raise ValueError(f"with conduction, extra must be the particle temperatures, shape "
                              f"({n},); got {None if extra is None else np.shape(extra)}")
-        return jnp.asarray(extra, jnp.float64)
-
-    def _wrap(self, pos):
-        return wrap_periodic_axis(pos, self.neighbor.periodic_length)
+        return to_device(extra, jnp.float64)
 
     # -- stepping ------------------------------------------------------------------------------
 
@@ -415,12 +423,12 @@ class DEM:
 
     def run_steps(self, state: DEMState, n_steps: int) -> DEMState:
         """``n_steps`` steps in one jitted loop (``lax.fori_loop``), without host-side checks."""
-        return self._run_steps(self.adopt(state), jnp.asarray(int(n_steps), jnp.int32))
+        return self._run_steps(self.adopt(state), to_device(int(n_steps), jnp.int32))
 
     def run_steps_in_place(self, state: DEMState, n_steps: int) -> DEMState:
         """:meth:`run_steps` reusing the buffers of ``state`` for the result (buffer donation:
         one copy of the state in memory instead of two); ``state`` is unusable afterwards."""
-        return self._run_chunk(self.adopt(state), jnp.asarray(int(n_steps), jnp.int32))
+        return self._run_chunk(self.adopt(state), to_device(int(n_steps), jnp.int32))
 
     def passes(self, new: DEMState) -> bool:
         """Whether :meth:`check_chunk` accepts the chunk that ended in ``new`` (no buffer
@@ -483,9 +491,11 @@ class DEM:
         done = 0
         while done < n_steps:
             k = min(chunk, n_steps - done)
-            start = state._replace(max_overlap=jnp.zeros_like(state.max_overlap))
+            # host-made arrays and copies (drumheat.devices: no compiled program each)
+            m = state.max_overlap
+            start = state._replace(max_overlap=to_device(np.zeros(m.shape, m.dtype)))
             if donate and not owned:
-                start = jax.tree_util.tree_map(jnp.copy, start)
+                start = jax.tree_util.tree_map(device_copy, start)
             good = state
             for attempt in range(max_reallocations + 1):
                 new, start = self._chunk(start, k, donate)
@@ -512,7 +522,7 @@ class DEM:
         """``(new, start)``: ``k`` steps from ``start``. With ``donate`` the chunk updates
         ``start``'s buffers in place; the start comes back (from a host copy) only when the
         chunk fails a check (:meth:`check_chunk` then decides), else None."""
-        n = jnp.asarray(k, jnp.int32)
+        n = to_device(k, jnp.int32)
         if not donate:
             return self._run_steps(start, n), start
         # the copy to the host must have read the start before the chunk overwrites it
@@ -613,9 +623,10 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     rebuilds, and the energy book."""
     n, mass, inertia, dtype = forces.n, forces.mass, forces.inertia, forces.dtype
     half = 0.5 * dt
-    # one value where all particles share it (the same quotient either way)
-    inv_m = 1.0 / shared_value(mass)
-    inv_i = 1.0 / shared_value(inertia)
+    # one value where all particles share it (the same quotient either way), divided on the
+    # host (one IEEE quotient as XLA's; an eager division would compile a program)
+    inv_m = to_device(1.0 / np.asarray(shared_value(mass)))
+    inv_i = to_device(1.0 / np.asarray(shared_value(inertia)))
     half_skin_sq = (0.5 * skin) ** 2
     time_dtype = jnp.float64 if jax.config.jax_enable_x64 else dtype
 
@@ -674,7 +685,7 @@ def _velocity_verlet(forces: ContactForces, neighbor: NeighborSetup, *, dt, skin
     # its events (CountingUpdate), run_segments' steps that keep the list run in the call, up
     # to the hook's next event, one call for all (the same numbers: `run_in_call`).
     runs = drifts and isinstance(extra_update, CountingUpdate) and conduction is None
-    dt_time = jnp.asarray(dt, time_dtype)
+    dt_time = to_device(dt, time_dtype)
 
     def drift_args(state: DEMState, aux):
         """``drift`` of the contact call: the constants with the pending half-kick's factor

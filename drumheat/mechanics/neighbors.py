@@ -386,7 +386,7 @@ def make_cell_grid(dim, box, cutoff, periodic_length, displacement) -> CellGrid:
                     tuple(float(c) for c in size), periodic_length is not None, displacement)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class NeighborSetup:
     """Static description of the neighbour search (built by :func:`make_neighbor_setup`).
 
@@ -472,37 +472,42 @@ class NeighborSetup:
         :data:`drumheat.devices.LENGTH_MULTIPLE`; the cell capacity ``capacity_multiplier``
         x the fullest cell, and at least ``min_cell_capacity``.
         """
-        pos = self.to_box(position)
         cells = lambda fullest: max(  # noqa: E731
             int(min_cell_capacity), int(fullest * self.capacity_multiplier), 1)
         slots = lambda count: round_length(  # noqa: E731
             max(int(min_capacity), int(count * self.capacity_multiplier) + 1, 1))
-        fresh = ListError(jnp.zeros((), jnp.uint8))
+        # each step of it one compiled program: eager jnp operations would compile a program
+        # each, which stays in memory (drumheat.devices.to_device)
         if self.builder == "cpu":
-            count, fullest = self._cpu_count(pos)
-            no_pairs = jnp.full((2, 0), pos.shape[0], jnp.int32)
-            return self._cpu_list(pos, no_pairs, slots(count), cells(fullest), fresh)[0]
+            count, fullest = self._cpu_count(position)
+            return _cpu_first_list(self._cpu_search, slots(count), cells(fullest),
+                                   not self.index_order, self.cutoff, np.asarray(self.lo),
+                                   position)
+        pos = _to_box(np.asarray(self.lo), position)
         cell_cap = cells(int(_fullest_cell(self.grid, pos)))
         target = slots(int(_count_pairs(self.grid, pos, cell_cap)[0]))
-        return self._list(pos, _build(self.grid, pos, target, cell_cap), fresh, cell_cap)
+        return _first_list(self, pos, _build(self.grid, pos, target, cell_cap), cell_cap)
 
     def count_pairs(self, position):
         """Number of pairs within the cutoff at ``position`` (host-side, for sizing buffers)."""
-        pos = self.to_box(position)
         if self.builder == "cpu":
-            return self._cpu_count(pos)[0]
+            return self._cpu_count(position)[0]
+        pos = _to_box(np.asarray(self.lo), position)
         return int(_count_pairs(self.grid, pos, max(int(_fullest_cell(self.grid, pos)), 1))[0])
 
-    def _cpu_count(self, pos) -> tuple[int, int]:
-        """``(pairs within the cutoff, fullest cell)`` at box-frame ``pos`` by a C++ build
+    @property
+    def _cpu_search(self) -> tuple:
+        """The C++ build's static inputs ``(cells, cell size, cutoff, period)``: values that
+        are the same from run to run of a scene (:func:`_cpu_count_program`)."""
+        g = self.grid
+        return (tuple(int(c) for c in g.cells), tuple(float(c) for c in g.cell_size),
+                float(g.cutoff), self.periodic_length)
+
+    def _cpu_count(self, position) -> tuple[int, int]:
+        """``(pairs within the cutoff, fullest cell)`` at ``position`` by a C++ build
         without slots (the JAX count gathers the candidates of the surrounding cells at once,
         in XLA temporaries that grow with N: docs/performance.md)."""
-        from drumheat.mechanics.cpu_kernel import neighbor_pairs
-
-        g, n = self.grid, pos.shape[0]
-        _, _, total, fullest, _ = neighbor_pairs(
-            pos, jnp.full((2, 0), n, jnp.int32), 0, g.cells, g.cell_size, g.cutoff,
-            self.periodic_length, n)
+        total, fullest = _cpu_count_program(self._cpu_search, np.asarray(self.lo), position)
         return int(total), int(fullest)
 
     def _cpu_list(self, pos, old_idx, capacity: int, cell_capacity: int, error):
@@ -577,6 +582,54 @@ def dense_bed_pairs(radius, cutoff: float, dim: int) -> float:
     r = np.asarray(radius, float).reshape(-1)
     mean = 0.5 * (DENSE_FRACTION[dim] * float(cutoff) ** dim / float(np.mean(r**dim)) - 1.0)
     return max(mean, 3.0) if dim == 2 else mean
+
+
+@jax.jit
+def _to_box(lo, position):
+    """:meth:`NeighborSetup.to_box` as one compiled program (``lo`` an argument)."""
+    return position - lo.astype(position.dtype)
+
+
+@partial(jax.jit, static_argnums=0)
+def _cpu_count_program(search: tuple, lo, position):
+    """``(pairs within the cutoff, fullest cell)`` of :meth:`NeighborSetup._cpu_count` at
+    ``position`` (``search``: :attr:`NeighborSetup._cpu_search`)."""
+    from drumheat.mechanics.cpu_kernel import neighbor_pairs
+
+    cells, cell_size, cutoff, period = search
+    pos = _to_box(lo, position)
+    n = pos.shape[0]
+    _, _, total, fullest, _ = neighbor_pairs(pos, jnp.full((2, 0), n, jnp.int32), 0, cells,
+                                             cell_size, cutoff, period, n)
+    return total, fullest
+
+
+@partial(jax.jit, static_argnums=(0, 1, 2, 3, 4))
+def _cpu_first_list(search: tuple, capacity: int, cell_capacity: int, ranked: bool,
+                    list_cutoff: float, lo, position):
+    """The list of a fresh allocation built in C++ (:meth:`NeighborSetup._cpu_list` from an
+    empty list) at ``position``: one compiled program, keyed by values that are the same from
+    run to run of a scene."""
+    from drumheat.mechanics.cpu_kernel import neighbor_pairs
+
+    cells, cell_size, cutoff, period = search
+    pos = _to_box(lo, position)
+    n = pos.shape[0]
+    idx, _, total, fullest, order = neighbor_pairs(
+        pos, jnp.full((2, 0), n, jnp.int32), capacity, cells, cell_size, cutoff, period,
+        cell_capacity, ranked=ranked)
+    error = _flag_overflows(ListError(jnp.zeros((), jnp.uint8)), total, capacity, fullest,
+                            cell_capacity)
+    return NeighborList(idx, pos, error, order if ranked else None, int(cell_capacity),
+                        int(capacity), list_cutoff)
+
+
+@partial(jax.jit, static_argnums=(0, 3))
+def _first_list(setup: "NeighborSetup", pos, built, cell_capacity: int):
+    """The list of a fresh allocation by the JAX build (:meth:`NeighborSetup._list` with no
+    overflows yet) as one compiled program (``setup`` static by identity: one program per
+    neighbour set-up, as :func:`_build` per grid)."""
+    return setup._list(pos, built, ListError(jnp.zeros((), jnp.uint8)), cell_capacity)
 
 
 def _flag_overflows(error, total, capacity: int, fullest, cell_capacity: int):

@@ -26,9 +26,11 @@ import math
 import warnings
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.devices import to_device
 from drumheat.geometry.walls import expand_walls, wall_bounds, walls_at_rest
 from drumheat.mechanics.integrator import make_dem, make_particles
 
@@ -125,10 +127,17 @@ def insertion_sites(walls, dim, spacing, clearance, bounds=None, periodic_length
         axes.append(np.arange(lo[a] + clearance, hi[a] - clearance + 1e-12, spacing))
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim)
     ok = np.ones(len(grid), bool)
-    xg = jnp.asarray(grid)
+    xg = to_device(grid)
     for w in walls:
-        ok &= np.asarray(w.distance(xg, 0.0)) > clearance
+        ok &= np.asarray(_distance(w, xg)) > clearance
     return grid[ok]
+
+
+@jax.jit
+def _distance(wall, x):
+    """The signed distance of the points ``x`` to ``wall`` at t = 0, as one compiled program
+    (an eager evaluation compiles each of its operations: drumheat.devices.to_device)."""
+    return wall.distance(x, 0.0)
 
 
 def _free_sites(sites, placed, r_placed, r_new, gap, periodic_length):

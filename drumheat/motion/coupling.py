@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from drumheat.devices import to_device
 from drumheat.mechanics.cpu_kernel import count_conduction
 from drumheat.mechanics.dissipation import SOURCES
 from drumheat.mechanics.integrator import CountingUpdate, PairCarried
@@ -35,7 +36,7 @@ from drumheat.thermal.network import ContactNetwork
 
 __all__ = ["CoupledHeat", "PairTimes", "ContactCount", "FrictionBook", "thermal_network",
            "make_thermal_update", "ThermalUpdate", "initial_extra", "reset_record", "reset_count",
-           "recorded_times", "contact_count",
+           "recorded_times", "contact_count", "mean_contacts",
            "drum_wall_step"]
 
 
@@ -224,7 +225,7 @@ def make_thermal_update(model: ThermalModel, n: int, n_walls: int, wall_heated, 
     members step jointly).
     """
     h = substeps * dt
-    heated = jnp.asarray(wall_heated, bool)
+    heated = to_device(wall_heated, bool)
     skeleton = eqx.partition(model, eqx.is_array)[1]
     if per_wall and wall_ids is None:
         wall_ids = np.arange(n_walls, dtype=np.int32)
@@ -373,21 +374,22 @@ def initial_extra(model: ThermalModel, T0, capacity: int, n: int, n_walls: int, 
     """
     if friction:
         accounts = tuple(accounts) + ("friction",)
-    z = jnp.zeros(n * n_walls, jnp.int32)
-    zc = jnp.zeros(capacity, jnp.int32)
-    zero = jnp.zeros(())
+    # made on the host (drumheat.devices.to_device: no compiled program each)
+    zeros = lambda shape, dtype=np.float64: to_device(np.zeros(shape, dtype))  # noqa: E731
+    z = zeros(n * n_walls, np.int32)
+    zc = zeros(capacity, np.int32)
+    zero = zeros(())
     book = None
     if friction:
-        book = FrictionBook(jnp.zeros(n), zero, jnp.zeros(len(SOURCES)), zero,
-                            jnp.zeros(len(SOURCES)))
+        book = FrictionBook(zeros(n), zero, zeros(len(SOURCES)), zero, zeros(len(SOURCES)))
     return CoupledHeat(
-        T=jnp.asarray(T0, float),
-        Q={a: jnp.zeros(()) for a in tuple(model.accounts) + tuple(accounts)},
-        model=eqx.partition(model, eqx.is_array)[0], k=jnp.asarray(0, jnp.int32), wall_time=z,
+        T=to_device(T0, float),
+        Q={a: zeros(()) for a in tuple(model.accounts) + tuple(accounts)},
+        model=eqx.partition(model, eqx.is_array)[0], k=to_device(0, jnp.int32), wall_time=z,
         rec_wall_time=z if record else None,
         pair=PairTimes(zc, zc if record else None),
         count=ContactCount(zero, zero), dt=float(dt),
-        Q_walls=jnp.zeros(n_walls) if per_wall else None,
+        Q_walls=zeros(n_walls) if per_wall else None,
         # [heat.drum_wall]: the segments' temperatures and accounts
         wall=model.drum_wall.initial() if model.drum_wall is not None else None,
         friction=book)
@@ -397,7 +399,7 @@ def _heated_weights(wall_heated):
     """(n_walls,) 1.0 for the heated walls, else 0.0: the weights of a particle's wall slots in
     the count of heated-wall contact time (one per wall, not per particle-wall slot: a constant
     array over all slots would stay in memory as an input of every compiled step)."""
-    return jnp.asarray(wall_heated, bool).astype(jnp.float64)
+    return to_device(wall_heated, jnp.float64)
 
 
 def _steps(counts, most=None):
@@ -453,6 +455,16 @@ def contact_count(extra, wall_heated) -> ContactCount:
                           _count(extra, _heated_weights(wall_heated))))
 
 
+@jax.jit
+def mean_contacts(extra, wall_heated, span):
+    """``(pairs, wall pairs)``: the mean number of particle pairs and of particle-heated-wall
+    pairs in contact over an output interval of ``span`` s (:func:`contact_count` / span), as
+    one compiled program (evaluated eagerly, each of its operations compiles one of its own:
+    :func:`drumheat.devices.to_device`)."""
+    count = contact_count(extra, wall_heated)
+    return count.pair / span, count.wall / span
+
+
 def reset_record(extra):
     """``extra`` with the contact times of the recording (:func:`recorded_times`) set to zero:
     the accumulators take minus the time since the last thermal step, which the next thermal
@@ -482,8 +494,16 @@ def thermal_step_limit(model: ThermalModel, n: int, dim: int, size_ratio: float,
     this bound keeps every explicit update a convex combination (the maximum principle).
     """
     z = (6 if dim == 2 else 12) * max(1.0, size_ratio) ** (dim - 1)
+    return float(_fullest_network_limit(model, int(n), float(z), float(walls_at_once)))
+
+
+@eqx.filter_jit
+def _fullest_network_limit(model: ThermalModel, n: int, z: float, walls_at_once: float):
+    """:func:`thermal_step_limit`'s bound for ``z`` contacts and ``walls_at_once`` heated wall
+    primitives per particle, as one compiled program (evaluated eagerly, each operation of the
+    model's conductance sum compiled one of its own: drumheat.devices.to_device)."""
     idx = jnp.arange(n, dtype=jnp.int32)
     # a pair (i, i) of weight w adds 2 w g to particle i: weight z / 2 gives z contacts
     net = ContactNetwork(idx, idx, jnp.full(n, 0.5 * z), idx, jnp.zeros(n, jnp.int32),
-                         jnp.full(n, float(walls_at_once)))
-    return float(model.stability_limit(net))
+                         jnp.full(n, walls_at_once))
+    return model.stability_limit(net)

@@ -37,13 +37,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from drumheat import assemble
-from drumheat.devices import to_host
+from drumheat.devices import to_device, to_host
 from drumheat.mechanics import DEMError, DEMState, make_dem
 from drumheat.mechanics.analysis import count_interfraction_contacts
 from drumheat.mechanics.dissipation import SOURCES
 from drumheat.mechanics.integrator import JIT_OPTIONS
 from drumheat.motion.base import register
-from drumheat.motion.coupling import (contact_count, initial_extra, make_thermal_update,
+from drumheat.motion.coupling import (initial_extra, mean_contacts, make_thermal_update,
                                       recorded_times, reset_count, reset_record)
 from drumheat.motion.dem_common import DEMMotion
 from drumheat.motion.replay import Recording
@@ -107,7 +107,7 @@ class ContactRecorder:
         """Record one interval: the neighbour pairs ``idx`` with their contact times
         (:func:`~drumheat.motion.coupling.recorded_times` of ``extra``), the wall contacts
         and the positions at its end."""
-        pt, wt = (np.asarray(a) for a in recorded_times(extra))
+        pt, wt = (np.asarray(a) for a in _recorded_times(extra))
         keep = (idx[0] < self.n) & (pt > 0)
         c = self.columns
         c["pair_i"].append(idx[0][keep])
@@ -323,7 +323,7 @@ class DEMBed(DEMMotion):
 
     def _start(self, state, t0):
         """The state a chunk starts from (:func:`chunk_start`)."""
-        return chunk_start(state, self._at_output(t0), self.wall_heated)
+        return _chunk_start(state, self._at_output(t0), self.wall_heated)
 
     def _at_output(self, t0) -> bool:
         """Whether ``t0`` is an output time (where the contact-time count starts anew)."""
@@ -424,17 +424,16 @@ class DEMBed(DEMMotion):
         log = dict(log, recording=recording, g0=g0)
         # the recording travels in the state as host data (no array leaves: a checkpoint holds
         # T, Q and g only); each chunk puts its own intervals on the device
-        return {"model": model, "T": T, "Q": Q, "g": jnp.asarray(g0, jnp.int64),
+        return {"model": model, "T": T, "Q": Q, "g": to_device(g0, jnp.int64),
                 "recording": recording}, log
 
     def observe(self, state) -> dict:
         if isinstance(state, dict):
             return {"T": state["T"], "Q": state["Q"], "g": state["g"]}
-        span = self.steps_per_output * self.dt
         ex = state.extra
-        count = contact_count(ex, self.wall_heated)
+        n_pairs, n_wall = mean_contacts(ex, self.wall_heated, self.steps_per_output * self.dt)
         row = {"T": ex.T, "Q": ex.Q, "position": state.position,
-               "n_pairs": count.pair / span, "n_wall": count.wall / span,
+               "n_pairs": n_pairs, "n_wall": n_wall,
                "mechanics": self.mechanics(state)}
         if ex.wall is not None:  # [heat.drum_wall]
             row["wall"] = ex.wall
@@ -477,7 +476,7 @@ class DEMBed(DEMMotion):
                                     eqx.combine(state.extra.model, self._skeleton).drum_wall)
         return Trajectory(
             t=self.t_out, T=T, Q=Q, position=positions, diameter=self.diameter,
-            mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),
+            mass=np.asarray(particles.mass), capacity=particles.host_capacity(),
             group=self.group,
             n_contacts=n_pairs, n_wall_contacts=n_wall, wall_area=d2 * cum_wall, extra=extra,
             files={"contacts.npz": rec.saver()} if rec is not None else {},
@@ -592,6 +591,9 @@ class DEMBed(DEMMotion):
         return None
 
 
+_recorded_times = jax.jit(recorded_times)  # one compiled program, not one per operation
+
+
 def chunk_start(state: DEMState, at_output: bool, wall_heated) -> DEMState:
     """The state a chunk starts from: the recording's accumulators
     (:func:`~drumheat.motion.coupling.reset_record`) and the overlap monitor cleared, and at the
@@ -601,6 +603,11 @@ def chunk_start(state: DEMState, at_output: bool, wall_heated) -> DEMState:
     if at_output:
         extra = reset_count(extra, wall_heated)
     return state._replace(extra=extra, max_overlap=jnp.zeros_like(state.max_overlap))
+
+
+#: :func:`chunk_start` as one compiled program (evaluated eagerly, each of its operations
+#: compiles one of its own: drumheat.devices.to_device)
+_chunk_start = jax.jit(chunk_start, static_argnums=1)
 
 
 def release_mechanics(state: DEMState) -> None:

@@ -359,7 +359,7 @@ class GranulatorParticle(AbstractMotion):
         n_out = len(t)
         return Trajectory(
             t=t, T=T, Q={a: v[keep] for a, v in rec["Q"].items()}, position=pos, diameter=d,
-            mass=np.asarray(model.particles.mass), capacity=np.asarray(model.particles.capacity),
+            mass=np.asarray(model.particles.mass), capacity=model.particles.host_capacity(),
             group=assemble.group_index(self.scene), n_contacts=np.zeros(n_out),
             n_wall_contacts=m2.astype(float), wall_area=np.zeros(n_out), extra=extra,
             stored_heat=H - H[0], files=files,

@@ -61,7 +61,7 @@ from drumheat.mechanics import make_dem
 from drumheat.models.moving_bed import BETA_HOPPER, lmtd
 from drumheat.motion.base import register
 from drumheat.motion.dem_common import DEMMotion
-from drumheat.motion.coupling import (contact_count, initial_extra, make_thermal_update,
+from drumheat.motion.coupling import (initial_extra, make_thermal_update, mean_contacts,
                                       reset_count)
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene, SceneError
@@ -318,13 +318,12 @@ class MovingBed(DEMMotion):
 
     def observe(self, state) -> dict:
         ex = state.extra
-        span = self.steps_per_output * self.dt
-        count = contact_count(ex, self.wall_heated)
+        n_pairs, n_wall = mean_contacts(ex, self.wall_heated, self.steps_per_output * self.dt)
         return {"T": ex.T, "Q": ex.Q, "position": state.position,
                 "Q_tubes": ex.Q_walls[self.geometry.tube_index],
                 "flow": {k: ex.flow[k] for k in FLOW_RECORDS},
                 "max_overlap": state.max_overlap,
-                "n_pairs": count.pair / span, "n_wall": count.wall / span,
+                "n_pairs": n_pairs, "n_wall": n_wall,
                 "mechanics": self.mechanics(state)}
 
     def finish(self, rows, log, state) -> Trajectory:
@@ -342,7 +341,7 @@ class MovingBed(DEMMotion):
         n_pairs, n_wall = r["n_pairs"], r["n_wall"]
         return Trajectory(
             t=t, T=r["T"], Q=r["Q"], position=r["position"], diameter=self.diameter,
-            mass=np.asarray(particles.mass), capacity=np.asarray(particles.capacity),
+            mass=np.asarray(particles.mass), capacity=particles.host_capacity(),
             group=self.group, n_contacts=np.concatenate([n_pairs[1:2], n_pairs[1:]]),
             n_wall_contacts=np.concatenate([n_wall[1:2], n_wall[1:]]),
             wall_area=np.zeros(len(t)), extra=ts, records=records,

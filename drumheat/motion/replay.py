@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from drumheat import assemble
+from drumheat.devices import to_device
 from drumheat.motion.base import register
 from drumheat.motion.static import ThermalBed
 from drumheat.motion.trajectory import Trajectory
@@ -184,7 +185,7 @@ class Recording:
                                ) / self.span
         self.match = restart_assignment(self.positions[-1], self.positions[0],
                                         np.asarray(rec["group"]))
-        self._match = jnp.asarray(self.match)
+        self._match = to_device(self.match)
 
     def __repr__(self) -> str:  # stable: it is part of a replay state's structure
         return f"Recording({self.n_intervals} intervals of {self.tau:g} s, {self.n} particles)"
@@ -204,19 +205,19 @@ class Recording:
         wpart, wi, wd = rec["wall_particle"], rec["wall_index"], rec["wall_duration"]
         pad = functools.partial(_pad_rows, rows=rows)
         # padding index n: ContactNetwork; weights: the contact-time fractions
-        pairs = (jnp.asarray(pad(pp, lambda a, b: pi[a:b], self.n, width=self.pair_width,
-                                 dtype=np.int32)),
-                 jnp.asarray(pad(pp, lambda a, b: pj[a:b], self.n, width=self.pair_width,
-                                 dtype=np.int32)),
-                 jnp.asarray(pad(pp, lambda a, b: np.asarray(pd[a:b], float) / tau, 0.0,
-                                 width=self.pair_width, dtype=float)))
-        walls = (jnp.asarray(pad(wp, lambda a, b: wpart[a:b], 0, width=self.wall_width,
-                                 dtype=np.int32)),
-                 jnp.asarray(pad(wp, lambda a, b: wd[a:b] / tau * self._heated[wi[a:b]], 0.0,
-                                 width=self.wall_width, dtype=float)),
-                 jnp.asarray(pad(wp, lambda a, b: self._wall_ids[wi[a:b]], 0,
-                                 width=self.wall_width, dtype=np.int32)))
-        return RecordedNetwork(pairs, walls, self._match, jnp.asarray(int(g), jnp.int64),
+        pairs = (to_device(pad(pp, lambda a, b: pi[a:b], self.n, width=self.pair_width,
+                               dtype=np.int32)),
+                 to_device(pad(pp, lambda a, b: pj[a:b], self.n, width=self.pair_width,
+                               dtype=np.int32)),
+                 to_device(pad(pp, lambda a, b: np.asarray(pd[a:b], float) / tau, 0.0,
+                               width=self.pair_width, dtype=float)))
+        walls = (to_device(pad(wp, lambda a, b: wpart[a:b], 0, width=self.wall_width,
+                               dtype=np.int32)),
+                 to_device(pad(wp, lambda a, b: wd[a:b] / tau * self._heated[wi[a:b]], 0.0,
+                               width=self.wall_width, dtype=float)),
+                 to_device(pad(wp, lambda a, b: self._wall_ids[wi[a:b]], 0,
+                               width=self.wall_width, dtype=np.int32)))
+        return RecordedNetwork(pairs, walls, self._match, to_device(int(g), jnp.int64),
                                tau, self.n_intervals)
 
     def block_intervals(self) -> int:
@@ -369,6 +370,6 @@ class ReplayBed(ThermalBed):
             t=np.asarray(self.times), T=r["T"], Q=r["Q"],
             position=np.stack([rec.position_at(m * self.steps_per_output) for m in range(n_out)]),
             diameter=self.diameter, mass=np.asarray(model.particles.mass),
-            capacity=np.asarray(model.particles.capacity), group=self.group,
+            capacity=model.particles.host_capacity(), group=self.group,
             n_contacts=np.full(n_out, rec.mean_pairs), n_wall_contacts=np.full(n_out, rec.mean_wall),
             wall_area=np.full(n_out, d2 * rec.mean_wall))

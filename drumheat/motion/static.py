@@ -153,7 +153,7 @@ class ThermalBed(AbstractMotion):
         model = state["model"]
         out = dict(t=np.asarray(self.times), T=r["T"], Q=r["Q"],
                    mass=np.asarray(model.particles.mass),
-                   capacity=np.asarray(model.particles.capacity),
+                   capacity=model.particles.host_capacity(),
                    group=assemble.group_index(self.scene))
         if "stored_heat" in r:
             out["stored_heat"] = r["stored_heat"] - r["stored_heat"][0]

@@ -11,6 +11,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+import jax
 import numpy as np
 import pandas as pd
 
@@ -23,6 +24,10 @@ from drumheat.results.files import write_results
 from drumheat.scene import Scene
 
 __all__ = ["Result", "make_result", "build_timeseries", "energy_balance", "drum_wall_accounts"]
+
+#: :func:`drumheat.results.observe.alpha_overall` as one compiled program (evaluated eagerly,
+#: each of its operations compiles one of its own: drumheat.devices.to_device)
+_alpha_overall = jax.jit(observe.alpha_overall)
 
 
 @dataclass
@@ -135,7 +140,7 @@ def build_timeseries(scene: Scene, traj: Trajectory) -> pd.DataFrame:
           and scene.drum.wall_temperature is not None):
         T_cap = traj.T @ traj.capacity / traj.capacity.sum()
         # eq. [1.10] times A: the bed's conductance, free of any area convention
-        alpha_A = np.asarray(observe.alpha_overall(
+        alpha_A = np.asarray(_alpha_overall(
             traj.t, T_cap, scene.drum.wall_temperature, T_cap[0], traj.capacity.sum(), 1.0))
         with np.errstate(divide="ignore", invalid="ignore"):  # no wall contact yet: inf, as before
             cols["alpha_overall"] = alpha_A / traj.wall_area

@@ -19,8 +19,9 @@ import weakref
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
+
+from drumheat.devices import device_copy
 
 __all__ = ["StartSpill", "copy_leaves", "own_copy"]
 
@@ -30,8 +31,9 @@ SPILL_DIR = "chunk-start"
 
 def own_copy(x) -> jax.Array:
     """A copy of the array ``x`` (a JAX or numpy array) on the default device, in a buffer of
-    its own (one a donation may take)."""
-    return jax.block_until_ready(jnp.array(x, copy=True))
+    its own (one a donation may take), made without a compiled program
+    (:func:`drumheat.devices.device_copy`)."""
+    return jax.block_until_ready(device_copy(x))
 
 
 def copy_leaves(leaves: list) -> list:

@@ -7,6 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jax import Array
 
+from drumheat.devices import to_device
 from drumheat.models import schluender
 from drumheat.models.contact_conductance import projected_area
 from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
@@ -88,7 +89,7 @@ class ContactConduction(AbstractEffect):
             alpha = table.alpha
         else:
             alpha = schluender_coefficients(ctx)[1]
-        return cls(alpha=coarse_grained_alpha(jnp.asarray(alpha, float), ctx.coarse_grain))
+        return cls(alpha=coarse_grained_alpha(to_device(alpha, float), ctx.coarse_grain))
 
 
 def coarse_grained_alpha(alpha, s: float):

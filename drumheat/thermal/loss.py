@@ -7,6 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jax import Array
 
+from drumheat.devices import to_device
 from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
 from drumheat.thermal.network import ContactNetwork
 from drumheat.thermal.particles import ThermalParticles
@@ -48,7 +49,7 @@ class HeatLoss(AbstractEffect):
         each real particle's surface, so a parcel loses what its ``s^3`` particles lose, and
         the loss per unit mass (the parcel's mass is ``s^3`` m) stays that of the fine bed
         (docs/models/coarse-graining.md)."""
-        alphaA = jnp.asarray(table.alphaA, float)
+        alphaA = to_device(table.alphaA, float)
         if ctx.coarse_grain != 1.0:
             alphaA = ctx.coarse_grain**3 * alphaA
         return cls(alphaA=alphaA, gas_temperature=jnp.asarray(ctx.gas.temperature, float))

@@ -8,6 +8,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jax import Array
 
+from drumheat.devices import to_device
+
 from drumheat.thermal.contact import schluender_coefficients
 from drumheat.thermal.effect import AbstractEffect, EffectContext, TableValues, register
 from drumheat.thermal.network import ContactNetwork
@@ -90,8 +92,8 @@ class WallConduction(AbstractEffect):
             alpha = table.alpha
         else:
             alpha = schluender_coefficients(ctx)[0]
-        return cls(alpha=jnp.asarray(alpha, float),
-                   wall_temperature=jnp.atleast_1d(jnp.asarray(ctx.wall_temperatures, float)),
+        return cls(alpha=to_device(alpha, float),
+                   wall_temperature=to_device(ctx.wall_temperatures, float, ndmin=1),
                    surfaces=ctx.wall_surfaces)
 
     def heat_flow_by_wall(self, T: Array, particles: ThermalParticles, net: ContactNetwork,
