@@ -29,8 +29,8 @@ def to_device(x, dtype=None, ndmin: int = 0):
 
     Outside a trace ``jnp.asarray`` of a numpy array runs a staging program (``lax.stage``)
     and a change of dtype a ``convert_element_type`` program, each compiled once per shape and
-    dtype, and XLA:CPU keeps about 1.4 MB of host memory per compiled program for the life of
-    the process (docs/performance.md, "Programs that stay in memory"). ``jax.device_put``
+    dtype, and XLA:CPU keeps host memory for every compiled program, however small, for the
+    life of the process (docs/performance.md, "Programs that stay in memory"). ``jax.device_put``
     copies the buffer without one. A tracer, or a list holding one, goes to ``jnp.array``
     (inside a trace nothing is compiled), and a JAX array already of the dtype and rank is
     returned as it is. A Python number becomes an array of the default dtype of its kind

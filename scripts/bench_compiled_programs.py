@@ -2,8 +2,8 @@
 they keep.
 
 Every program XLA compiles stays in memory for the life of the process (JAX's caches hold the
-executable); on XLA:CPU each keeps about 1.4 MB of host memory, however small it is
-(``--probe`` measures it on this machine). A ``jnp`` operation outside ``jit`` is such a program
+executable); on XLA:CPU each keeps host memory however small it is (``--probe`` measures
+how much on this machine). A ``jnp`` operation outside ``jit`` is such a program
 (one per operation, shape and dtype: ``jit(multiply)``, and ``jit(stage)`` for ``jnp.asarray`` of
 a numpy array), so set-up code written in eager ``jnp`` costs host memory and compile time that
 the run's size does not explain. This script runs a built-in scene through ``drumheat.run`` in a

@@ -1,13 +1,11 @@
 """The programs a run compiles: drumheat's own compiled functions, no eager jnp operations.
 
-Every program XLA compiles stays in memory for the life of the process, about 1.4 MB of host
-memory each on XLA:CPU however small it is, and an eager ``jnp`` operation is one program per
-operation, shape and dtype (``jnp.asarray`` of a numpy array too: ``jit(stage)``). The
-built-in drum's set-up written in eager jnp compiled 134 programs, 6.2 s in XLA, and kept
-176 MB in JAX's caches (docs/performance.md, "Programs that stay in memory"); set-up code
-builds its arrays with numpy and puts them on the device with
-:func:`drumheat.devices.to_device`, and host-side work on device arrays runs as one compiled
-function.
+Every program XLA compiles stays in memory for the life of the process (on XLA:CPU host
+memory for every program, a single operation's too), and an eager ``jnp`` operation
+is one program per operation, shape and dtype (``jnp.asarray`` of a numpy array too:
+``jit(stage)``); docs/performance.md, "Programs that stay in memory". Set-up code builds its
+arrays with numpy and puts them on the device with :func:`drumheat.devices.to_device`, and
+host-side work on device arrays runs as one compiled function.
 """
 
 import contextlib
