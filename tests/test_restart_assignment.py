@@ -32,8 +32,10 @@ def test_blocks_cover_both_sets_once_in_equal_parts():
 def test_squared_distances_are_the_direct_sums_bit_for_bit():
     rng = np.random.default_rng(6)
     x, y = rng.normal(size=(70, 3)), rng.normal(size=(50, 3)) * 3
-    np.testing.assert_array_equal(squared_distances(x, y),
-                                  np.sum((x[:, None, :] - y[None, :, :]) ** 2, axis=-1))
+    direct = np.sum((x[:, None, :] - y[None, :, :]) ** 2, axis=-1)
+    np.testing.assert_array_equal(squared_distances(x, y), direct)
+    for rows in (1, 16, 70, 500):  # row blocks that do and do not divide the 70 rows
+        np.testing.assert_array_equal(squared_distances(x, y, rows=rows), direct)
 
 
 def test_small_group_is_the_optimal_assignment():

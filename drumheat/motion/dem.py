@@ -46,6 +46,7 @@ from drumheat.motion.base import register
 from drumheat.motion.coupling import (initial_extra, mean_contacts, make_thermal_update,
                                       recorded_times, reset_count, reset_record)
 from drumheat.motion.dem_common import DEMMotion
+from drumheat.motion.npz_files import save_npz
 from drumheat.motion.replay import Recording
 from drumheat.motion.rows import stack_arrays, stack_rows
 from drumheat.motion.spooled_array import SpooledArray
@@ -176,8 +177,8 @@ class ContactRecorder:
 
     def save(self, path):
         """Write ``contacts.npz`` (memory-mapped intervals are read in blocks as they are
-        compressed)."""
-        np.savez_compressed(path, **self.arrays())
+        compressed, their pages given back after each block: :func:`save_npz`)."""
+        save_npz(path, self.arrays())
 
     def saver(self):
         """:meth:`save` for a run's result (``Trajectory.files``). With a ``directory`` it
@@ -186,7 +187,7 @@ class ContactRecorder:
         if self.directory is None:
             return self.save
         arrays = self.arrays()
-        return lambda path: np.savez_compressed(path, **arrays)
+        return lambda path: save_npz(path, arrays)
 
 
 @register

@@ -32,6 +32,7 @@ import numpy as np
 from drumheat import assemble
 from drumheat.devices import to_device
 from drumheat.motion.base import register
+from drumheat.motion.npz_files import release_pages
 from drumheat.motion.static import ThermalBed
 from drumheat.motion.trajectory import Trajectory
 from drumheat.scene import Scene, SceneError
@@ -98,15 +99,18 @@ def restart_assignment(end_pos, start_pos, group, block: int = ASSIGNMENT_BLOCK)
     return match
 
 
-def squared_distances(x, y) -> np.ndarray:
-    """``(len(x), len(y))`` squared distances, one axis at a time: two such arrays alive at
-    once instead of the three-times larger ``(len(x), len(y), dim)`` differences (the same
-    sums in the same order)."""
+def squared_distances(x, y, rows: int = 256) -> np.ndarray:
+    """``(len(x), len(y))`` squared distances, one axis at a time and ``rows`` rows of ``x`` at
+    a time: besides the result, one ``(rows, len(y))`` temporary instead of the three-times
+    larger ``(len(x), len(y), dim)`` differences (the same sums in the same order)."""
     out = np.zeros((len(x), len(y)))
-    for k in range(x.shape[1]):
-        d = x[:, k, None] - y[None, :, k]
-        d *= d
-        out += d
+    d = np.empty((min(rows, len(x)), len(y)))
+    for r0 in range(0, len(x), rows):
+        blk, tmp = out[r0:r0 + rows], d[:min(rows, len(x) - r0)]
+        for k in range(x.shape[1]):
+            np.subtract(x[r0:r0 + rows, k, None], y[None, :, k], out=tmp)
+            tmp *= tmp
+            blk += tmp
     return out
 
 
@@ -186,6 +190,14 @@ class Recording:
         self.match = restart_assignment(self.positions[-1], self.positions[0],
                                         np.asarray(rec["group"]))
         self._match = to_device(self.match)
+        self._release()
+
+    def _release(self) -> None:
+        """Give back the resident pages of the recording's memory maps (a run's result folder:
+        :func:`~drumheat.motion.npz_files.release_pages`), which every read of them leaves in
+        the process's memory for as long as the recording lives; nothing for arrays in memory."""
+        for value in self._rec.values():
+            release_pages(value)
 
     def __repr__(self) -> str:  # stable: it is part of a replay state's structure
         return f"Recording({self.n_intervals} intervals of {self.tau:g} s, {self.n} particles)"
@@ -217,6 +229,7 @@ class Recording:
                                width=self.wall_width, dtype=float)),
                  to_device(pad(wp, lambda a, b: self._wall_ids[wi[a:b]], 0,
                                width=self.wall_width, dtype=np.int32)))
+        self._release()  # the block is on the device now
         return RecordedNetwork(pairs, walls, self._match, to_device(int(g), jnp.int64),
                                tau, self.n_intervals)
 
@@ -247,7 +260,9 @@ class Recording:
 
     def position_at(self, g: int) -> np.ndarray:
         """Positions at the start of (cyclic) interval ``g``."""
-        return np.asarray(self.positions[g % self.n_intervals], float)
+        out = np.array(self.positions[g % self.n_intervals], float)
+        release_pages(self.positions)
+        return out
 
 
 # a Recording in a replay state is host data, not array leaves: a node without children, its

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from drumheat.motion.npz_files import release_pages
+
 __all__ = ["RowSpool", "stack_rows", "stack_arrays", "flatten_dict", "unflatten_dict"]
 
 
@@ -158,11 +160,13 @@ def stack_arrays(rows, name: str, arrays: Iterable) -> np.ndarray:
     out = np.lib.format.open_memmap(rows.stacked_file(name), mode="w+", dtype=first.dtype,
                                     shape=(n,) + first.shape)
     out[0] = first
+    release_pages(out)  # written rows go to the file, not the resident memory
     k = 1
     for a in it:
         if k >= n:
             raise ValueError(f"stack_arrays({name!r}): more arrays than rows ({n})")
         out[k] = a
+        release_pages(out)
         k += 1
     out.flush()
     return out[:k] if k < n else out

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drumheat.motion.npz_files import save_npz
 from drumheat.motion.rows import stack_arrays
 
 #: the manifest of a result folder: the names of the files and folders drumheat wrote into it
@@ -301,7 +302,7 @@ def write_results(result, out_dir=None, figures: bool = True, figure_formats=("p
                       position=traj.position,
                       group_names=np.array([g.name for g in result.scene.groups]),
                       **traj.mechanics)
-        np.savez_compressed(tmp / "particles.npz", **arrays)
+        save_npz(tmp / "particles.npz", arrays)  # the frames' pages given back as written
         (tmp / "scene.toml").write_text(result.scene.to_toml())
         if traj.drum_wall:  # segment temperatures of a drum wall with heat capacity
             write_drum_wall(tmp / "wall.npz", traj)
@@ -519,5 +520,5 @@ def _write_partial_particles(path, times, rows, group, group_names):
                                        (r["mechanics"][key] for r in rows))
     tmp = path.with_name(".particles.npz.writing")
     with open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
+        save_npz(fh, arrays)
     os.replace(tmp, path)

@@ -964,16 +964,18 @@ def save_figures(result, folder, formats=("png",), dpi: int = 120) -> list[Path]
         raise ValueError(f"figure formats must be among {FIGURE_FORMATS}, got {list(formats)}")
     folder = Path(folder)
     out = []
-    figs = {"mean_temperatures": plot_mean_temperatures(result),
-            "temperature_distributions": plot_distributions(result)}
+    # each figure is drawn, written and closed before the next: one figure in memory at a time
+    figs = {"mean_temperatures": plot_mean_temperatures,
+            "temperature_distributions": plot_distributions}
     if "alpha_overall" in result.timeseries:
-        figs["alpha_overall"] = plot_alpha_overall(result)
+        figs["alpha_overall"] = plot_alpha_overall
     if result.trajectory.drum_wall:
-        figs["drum_wall"] = plot_drum_wall(result)
+        figs["drum_wall"] = plot_drum_wall
     if result.scene.dim == 2 or (result.scene.drum is not None
                                  and result.scene.motion.model in ("dem", "replay")):
-        figs["snapshot_final"] = plot_snapshot(result, -1)  # 3D: the mid-depth slice
-    for name, fig in figs.items():
+        figs["snapshot_final"] = lambda r: plot_snapshot(r, -1)  # 3D: the mid-depth slice
+    for name, draw in figs.items():
+        fig = draw(result)
         for fmt in formats:
             fig.savefig(folder / f"{name}.{fmt}", dpi=dpi, bbox_inches="tight")  # long titles
             out.append(folder / f"{name}.{fmt}")
