@@ -5,8 +5,8 @@ them back memory-mapped (:class:`drumheat.motion.spooled_array.SpooledArray`,
 :func:`drumheat.motion.rows.stack_arrays`). ``np.savez_compressed`` reads such an array through
 its mapping, and every page it reads stays in the process's resident memory for as long as the
 mapping lives: writing ``contacts.npz`` and ``particles.npz`` at the end of a run made the whole
-recording and all frames resident at once (docs/performance.md, "Programs that stay in memory",
-the result files). The pages are the files' (the system may drop them), but they count in the
+recording and all frames resident at once (docs/performance.md, "Mapped files and the restart
+assignment at the end of a run"). The pages are the files' (the system may drop them), but they count in the
 resident memory a user sees.
 
 :func:`save_npz` writes the same file as ``np.savez_compressed`` (``np.savez`` with
