@@ -6,8 +6,8 @@ them back memory-mapped (:class:`drumheat.motion.spooled_array.SpooledArray`,
 its mapping, and every page it reads stays in the process's resident memory for as long as the
 mapping lives: writing ``contacts.npz`` and ``particles.npz`` at the end of a run made the whole
 recording and all frames resident at once (docs/performance.md, "Mapped files and the restart
-assignment at the end of a run"). The pages are the files' (the system may drop them), but they count in the
-resident memory a user sees.
+assignment at the end of a run"). The pages are the files' (the system may drop them), but
+they count in the resident memory a user sees.
 
 :func:`save_npz` writes the same file as ``np.savez_compressed`` (``np.savez`` with
 ``compressed=False``): one ``.npy`` entry per array, the header of ``np.lib.format``, the data
@@ -41,12 +41,10 @@ def release_pages(array) -> bool:
     ``"w+"``) are released; a copy-on-write mapping (mode ``"c"``) would lose its changes and
     is left alone.
     """
-    mm = _mapping(array)
-    if mm is None or not hasattr(mm, "madvise"):
+    base = _memmap_base(array)
+    if base is None or base.mode == "c" or not hasattr(mmap, "MADV_DONTNEED"):
         return False
-    if getattr(array, "mode", None) == "c" or getattr(_memmap_base(array), "mode", None) == "c":
-        return False
-    mm.madvise(mmap.MADV_DONTNEED)
+    base._mmap.madvise(mmap.MADV_DONTNEED)
     return True
 
 
@@ -75,8 +73,8 @@ def save_npz(path, arrays: dict, compressed: bool = True) -> None:
             if array.dtype.hasobject:
                 raise ValueError(f"save_npz: {name!r} is an object array")
             with zf.open(name + ".npy", "w", force_zip64=True) as fh:
-                if _mapping(array) is not None and (array.flags.c_contiguous
-                                                    or array.flags.f_contiguous):
+                if _memmap_base(array) is not None and (array.flags.c_contiguous
+                                                        or array.flags.f_contiguous):
                     _write_mapped(fh, array)
                 else:  # numpy's writer (a strided view of a mapping: released at the end)
                     np.lib.format.write_array(fh, array, allow_pickle=False)
@@ -99,16 +97,11 @@ def _write_mapped(fh, array) -> None:
 
 
 def _memmap_base(array):
-    """The ``np.memmap`` an array is (a view of), or None."""
+    """The ``np.memmap`` holding the mapping under ``array`` (the array itself or the memmap it
+    is a view of), or None."""
     a = array
     while isinstance(a, np.ndarray):
         if isinstance(a, np.memmap) and isinstance(getattr(a, "_mmap", None), mmap.mmap):
             return a
         a = a.base
     return None
-
-
-def _mapping(array):
-    """The ``mmap.mmap`` under a ``np.memmap`` (or a view of one), or None."""
-    base = _memmap_base(array)
-    return None if base is None else base._mmap
