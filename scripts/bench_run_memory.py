@@ -11,7 +11,10 @@ with a thread that attributes the resident memory's high-water mark (``VmHWM``, 
 ``/proc/self/clear_refs`` at each change of phase; sampled every 50 ms) to the phase the run is
 in, told by the function on the main thread's stack, and the anonymous resident memory
 (``RssAnon``: without the pages of mapped files, which count in ``VmHWM`` while they are
-mapped but which the system can drop) sampled alike. Printed: each phase's peak above the
+mapped but which the system can drop) sampled alike; "other" is what no phase names, the run
+loop itself (above all the output rows it fetches from the device). JAX dispatches
+asynchronously, so a phase's peak may hold work that the phase before it dispatched: the run's
+first output row waits on the initial state's forces. Printed: each phase's peak above the
 resident memory before the run, and the slope between successive N (kB per particle), which
 leaves out what does not grow with N (compiled code, the compiler's own peak). (The resets
 also lower the process's ``ru_maxrss``, so the run's own ``summary.json`` ``peak_memory_MB`` is
@@ -186,7 +189,7 @@ def main():
 
 #: the phases in the tables' order
 ORDER = ["set-up", "estimate", "steps", "recording", "switch to replay", "replay", "trajectory",
-         "result files"]
+         "result files", "other"]
 
 
 def header():

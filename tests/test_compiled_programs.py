@@ -28,7 +28,7 @@ RUN_PROGRAMS = {
     # set-up: the thermal model, the pour, the neighbour lists, the first forces
     "_spheres", "_fullest_network_limit", "_distance", "_wrapped", "_to_box",
     "_cpu_count_program", "_cpu_first_list", "_fullest_cell", "_count_pairs", "_build",
-    "_first_list", "<unnamed function>", "energies",
+    "_first_list", "rest_forces", "<unnamed function>", "energies",
     # the chunks of the DEM and of the replay, and the host-side work between them
     "run_steps", "chunk_start", "_chunk_diagnostics", "particle_mechanics", "mean_contacts",
     "recorded_times", "_replay_steps",

@@ -142,7 +142,7 @@ def test_contact_times_are_whole_steps():
     # steps from a fresh state the recorded times are dt times the number of steps each
     # contact conducted (pair_conducts / wall_conducts of every step, counted here), exactly,
     # through the thermal sub-steps' folds; the output interval's count is their sum
-    from drumheat.motion.coupling import contact_count, recorded_times
+    from drumheat.motion.coupling import contact_count, mean_contacts, recorded_times
 
     bed = make_motion(dem_scene(**{"dem.thermal_substeps": 3, "dem.record_interval": 0.05}))
     dem = bed.dem
@@ -163,6 +163,11 @@ def test_contact_times_are_whole_steps():
     heated = np.tile(np.asarray(bed.wall_heated, bool), bed.n)
     assert float(count.pair) == pairs.sum() * bed.dt
     assert float(count.wall) == walls[heated].sum() * bed.dt
+    # with the bound of the thermal sub-steps the pending pair times sum in int32: the same
+    # count (every partial sum a whole number of steps), also the output rows' mean
+    assert contact_count(state.extra, bed.wall_heated, bed.substeps) == count
+    assert (mean_contacts(state.extra, bed.wall_heated, 0.1, bed.substeps)
+            == mean_contacts(state.extra, bed.wall_heated, 0.1))
 
 
 def test_step_sums_in_int32_are_exact():

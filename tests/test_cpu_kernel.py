@@ -186,6 +186,26 @@ def test_steps_without_contact_details(kernel):
                                atol=1e-12 * R_P)
 
 
+@pytest.mark.parametrize("kernel", ["jax", pytest.param("cpu", marks=needs_kernel)])
+def test_init_evaluates_the_contacts_forces(kernel):
+    """DEM.init takes the forces, torques and largest overlap of its state from a program that
+    returns those alone (the contact call's per-slot outputs its temporaries, no per-pair
+    details): the numbers of the full contact evaluation, bit for bit with the C++ loop, to
+    round-off with the JAX kernel (XLA fuses the smaller program otherwise)."""
+    dem = _bed(3, jnp.float64, kernel, "projected", 0.05)[0]
+    twin = _bed(3, jnp.float64, "jax", "projected", 0.05)[1]
+    st = dem.init(twin.position, twin.velocity, twin.angular_velocity, extra=twin.extra)
+    full = dem._forces(st.position, st.velocity, st.angular_velocity, st.time, st.nbrs,
+                       st.pair_spring, st.wall_spring)
+    assert float(full.max_overlap) > 0
+    for got, want, what in ((st.force, full.force, "force"), (st.torque, full.torque, "torque"),
+                            (st.max_overlap, full.max_overlap, "max_overlap")):
+        if kernel == "cpu":
+            np.testing.assert_array_equal(np.asarray(got), np.asarray(want), what)
+        else:
+            _close(got, want, REL[jnp.float64], what)
+
+
 def _close(x, y, rel, what):
     """x == y to ``rel`` of the largest |x| (round-off of the sums over contacts)."""
     x, y = np.asarray(x), np.asarray(y)

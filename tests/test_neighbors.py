@@ -20,6 +20,15 @@ def _reference(setup, pos):
     return sort_pairs(fns.allocate(setup.to_box(pos)), pos.shape[0])
 
 
+def _scattered(rng, n, dim, periodic, dtype=np.float64):
+    """``(lo, hi, positions)``: n points uniform in a 0.3 m box (along a periodic last axis
+    ``[0, periodic)``)."""
+    lo, hi = np.full(dim, -0.15), np.full(dim, 0.15)
+    if periodic:
+        lo[-1], hi[-1] = 0.0, periodic
+    return lo, hi, jnp.asarray(rng.uniform(lo, hi, (n, dim)), dtype)
+
+
 def _pairs(nbrs, n):
     idx = np.asarray(nbrs.idx)
     return idx[:, idx[0] < n]
@@ -30,10 +39,7 @@ def _pairs(nbrs, n):
 def test_same_pairs_as_jax_md(dim, periodic, dtype):
     rng = np.random.default_rng(dim + (periodic is not None))
     n, cutoff = 1500, 0.02
-    lo, hi = np.full(dim, -0.15), np.full(dim, 0.15)
-    if periodic:
-        lo[-1], hi[-1] = 0.0, periodic
-    pos = jnp.asarray(rng.uniform(lo, hi, (n, dim)), dtype)
+    lo, hi, pos = _scattered(rng, n, dim, periodic, dtype)
     setup = make_neighbor_setup(dim, lo, hi, cutoff, 0.004, periodic)
     ours = setup.allocate(pos)
     ref = _reference(setup, pos)
@@ -50,6 +56,38 @@ def test_same_pairs_as_jax_md(dim, periodic, dtype):
     # every found pair is within the cutoff and listed once, smaller index first
     p = _pairs(again, n)
     assert np.all(p[0] < p[1]) and len({tuple(c) for c in p.T}) == p.shape[1]
+
+
+@pytest.mark.parametrize("dim,periodic", [(2, None), (3, None), (3, 0.12)])
+def test_squared_distance_is_the_displacements(dim, periodic):
+    """NeighborSetup.squared_distance (the form XLA fuses with its gathers, for the output
+    rows' contact numbers) is the squared length of the displacement, its squares added in
+    the order x, y, z, across the periodic boundary too, for the pairs of a list (padding
+    index N clamped)."""
+    n = 800
+    lo, hi, pos = _scattered(np.random.default_rng(7 + dim), n, dim, periodic)
+    setup = make_neighbor_setup(dim, lo, hi, 0.03, 0.004, periodic)
+    idx = setup.allocate(pos).idx
+    i, j = jnp.minimum(idx[0], n - 1), jnp.minimum(idx[1], n - 1)
+    d = setup.displacement(pos[j], pos[i])
+    squares = np.asarray(d) ** 2
+    expected = squares[:, 0] + squares[:, 1]
+    if dim == 3:
+        expected = expected + squares[:, 2]
+    got = np.asarray(jax.jit(setup.squared_distance)(pos[j], pos[i]))
+    # eagerly the same operations bit for bit; compiled, XLA may fuse the minimum image's
+    # multiply and subtract into one multiply-add (its own rounding of a wrapped component)
+    np.testing.assert_array_equal(np.asarray(setup.squared_distance(pos[j], pos[i])), expected)
+    if periodic:
+        np.testing.assert_array_max_ulp(got, expected, maxulp=2)
+    else:
+        np.testing.assert_array_equal(got, expected)
+    # XLA's reduction adds the three in another order
+    np.testing.assert_array_max_ulp(got, np.asarray(jnp.sum(d * d, axis=-1)), maxulp=2)
+    if periodic:  # pairs across the boundary are among them, at their minimum image
+        dz = np.abs(np.asarray(pos[j, -1] - pos[i, -1]))
+        across = dz > periodic / 2
+        assert across.any() and np.all(got[across] < 0.03**2)
 
 
 def test_small_box_is_one_cell_per_short_axis():

@@ -40,13 +40,12 @@ def particle_mechanics(dem, state) -> dict:
     pos = state.position
     n = pos.shape[0]
     radius = dem.particles.radius.astype(pos.dtype)
+    # per pair slot one float32 and no (M, dim) array (NeighborSetup.squared_distance); the
+    # padding slots (index N) gather a clamped particle, count 0 and fall out of the sums
     i, j = state.nbrs.idx[0], state.nbrs.idx[1]
-    valid = i < n
-    ii, jj = jnp.where(valid, i, 0), jnp.where(valid, j, 0)
-    d = dem.neighbor.displacement(pos[jj], pos[ii])
-    touch = (valid & (jnp.sum(d * d, axis=-1) < (radius[ii] + radius[jj]) ** 2)).astype(
-        jnp.float32)
-    coordination = (jax.ops.segment_sum(touch, ii, n) + jax.ops.segment_sum(touch, jj, n))
+    d2 = dem.neighbor.squared_distance(pos[j], pos[i])
+    touch = ((i < n) & (d2 < (radius[i] + radius[j]) ** 2)).astype(jnp.float32)
+    coordination = (jax.ops.segment_sum(touch, i, n) + jax.ops.segment_sum(touch, j, n))
     wall_contacts = jnp.zeros(n, jnp.float32)
     for wall in dem.walls:
         distance = wall.evaluate(pos, state.time)[0]

@@ -328,6 +328,9 @@ class DEM:
     _diag: Callable
     _energies: Callable
     _run_chunk: Optional[Callable] = None
+    #: ``(force, torque, max_overlap)`` alone, for :meth:`init` (the other outputs of the
+    #: contact call, per pair slot, are then XLA's temporaries, and the details not computed)
+    _rest_forces: Optional[Callable] = None
     default_chunk: int = 1000
     cell_capacity: int = 0
     _external: Optional[Callable] = None
@@ -398,9 +401,9 @@ class DEM:
             n_rebuilds=to_device(0, jnp.int32), max_overlap=to_device(0.0, dt_),
             extra=self._check_temperature(extra),
         )
-        res = self._forces(state.position, state.velocity, state.angular_velocity, state.time,
-                           state.nbrs, state.pair_spring, state.wall_spring)
-        f, m, ovl = res.force, res.torque, res.max_overlap
+        f, m, ovl = self._rest_forces(state.position, state.velocity, state.angular_velocity,
+                                      state.time, state.nbrs, state.pair_spring,
+                                      state.wall_spring)
         if self._external is not None:
             f = f + jnp.asarray(self._external(state.position, state.velocity, state.time,
                                                state.extra), dt_)
@@ -1173,6 +1176,11 @@ def make_dem(
         always_rebuild=always_rebuild, batch_axis=batch_axis, external_force=external_force,
         conduction=conduction, extra_update=extra_update, boundary_update=boundary_update)
     diag = jax.jit(partial(_chunk_diagnostics, lo=dom_lo, hi=dom_hi, periodic_axis=periodic_axis))
+
+    def rest_forces(*args):
+        res = forces(*args, details=False)
+        return res.force, res.torque, res.max_overlap
+
     dem = DEM(
         dt=dt, t_crit=t_crit, m_min=m_min, k_max=k_max, dim=dim, walls=walls,
         particles=particles, params=params, neighbor=neighbor, dtype=dtype, gravity=gravity,
@@ -1180,6 +1188,7 @@ def make_dem(
         _forces=_jit(partial(forces, details=True)), _step=_jit(step),
         _run_steps=_jit(run_steps), _diag=diag,
         _energies=_jit(energies), _run_chunk=_jit(run_steps, donate=True),
+        _rest_forces=_jit(rest_forces),
         default_chunk=int(chunk), conduction=conduction,
         cell_capacity=cell_cap, _external=external_force, step_fn=step, run_steps_fn=run_steps,
         position_dtype=position_dtype, fold_length=fold,

@@ -93,11 +93,15 @@ def make_displacement(dim: int, periodic_length: Optional[float] = None) -> Call
 
     def displacement(Ra, Rb, **unused):
         dR = Ra - Rb
-        dz = dR[..., -1]
-        dz = dz - L * jnp.round(dz / L)
-        return dR.at[..., -1].set(dz)
+        return dR.at[..., -1].set(minimum_image(dR[..., -1], L))
 
     return displacement
+
+
+def minimum_image(dz, period: float):
+    """The component ``dz`` (m) of a displacement along a periodic axis of length ``period``
+    (m), folded to its minimum image ``dz - L round(dz / L)``."""
+    return dz - period * jnp.round(dz / period)
 
 
 def pair_sources(old_idx, new_idx, n, old_sorted: bool = False):
@@ -555,6 +559,26 @@ class NeighborSetup:
         from drumheat.mechanics.cpu_kernel import take_pair_data_in_place
 
         return take_pair_data_in_place(data, source)
+
+    def squared_distance(self, Ra, Rb):
+        """``|displacement(Ra, Rb)|^2`` (m^2) over the last axis, the components' squares added
+        in their order, ``(x^2 + y^2) + z^2``.
+
+        One elementwise expression per component, which XLA fuses with the gathers that make
+        ``Ra`` and ``Rb`` (``pos[j]``, ``pos[i]`` over a list's pairs): no ``(M, dim)`` array
+        is written out. :attr:`displacement` sets its periodic column into the difference, an
+        update that XLA:CPU materialises, and a sum over the last axis is a reduction XLA:CPU
+        runs apart from the elementwise code that feeds it. (That reduction adds three
+        components as ``(x^2 + z^2) + y^2``, and compiled it may fuse the minimum image's
+        multiply and subtract into one multiply-add: either may change the last bit against
+        ``jnp.sum(d * d, axis=-1)``.)"""
+        d2 = None
+        for k in range(self.dim):
+            dk = Ra[..., k] - Rb[..., k]
+            if k == self.dim - 1 and self.periodic_length is not None:
+                dk = minimum_image(dk, self.periodic_length)
+            d2 = dk * dk if d2 is None else d2 + dk * dk
+        return d2
 
     def max_displacement_sq(self, position, nbrs):
         """Largest squared displacement (m^2) of any particle since the last build."""

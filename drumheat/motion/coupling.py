@@ -20,6 +20,7 @@ thermal step.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, NamedTuple, Optional
 
 import equinox as eqx
@@ -448,20 +449,23 @@ def recorded_times(extra):
     return (extra.pair.rec_time + pair) * extra.dt, (extra.rec_wall_time + wall) * extra.dt
 
 
-def contact_count(extra, wall_heated) -> ContactCount:
+def contact_count(extra, wall_heated, substeps=None) -> ContactCount:
     """The contact time of all particle pairs and of all particle-heated-wall contacts since
-    :func:`reset_count`, s (``wall_heated`` (n_walls,) as for :func:`make_thermal_update`)."""
+    :func:`reset_count`, s (``wall_heated`` (n_walls,) as for :func:`make_thermal_update`;
+    ``substeps``, if given: the mechanical steps per thermal step of the update that made
+    ``extra``, the most steps a pair's count since the last thermal step can hold, which lets
+    the sum run in int32, :func:`_steps`)."""
     return ContactCount(*(c * extra.dt for c in
-                          _count(extra, _heated_weights(wall_heated))))
+                          _count(extra, _heated_weights(wall_heated), substeps)))
 
 
-@jax.jit
-def mean_contacts(extra, wall_heated, span):
+@functools.partial(jax.jit, static_argnames="substeps")
+def mean_contacts(extra, wall_heated, span, substeps=None):
     """``(pairs, wall pairs)``: the mean number of particle pairs and of particle-heated-wall
     pairs in contact over an output interval of ``span`` s (:func:`contact_count` / span), as
     one compiled program (evaluated eagerly, each of its operations compiles one of its own:
     :func:`drumheat.devices.to_device`)."""
-    count = contact_count(extra, wall_heated)
+    count = contact_count(extra, wall_heated, substeps)
     return count.pair / span, count.wall / span
 
 

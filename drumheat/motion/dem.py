@@ -432,7 +432,8 @@ class DEMBed(DEMMotion):
         if isinstance(state, dict):
             return {"T": state["T"], "Q": state["Q"], "g": state["g"]}
         ex = state.extra
-        n_pairs, n_wall = mean_contacts(ex, self.wall_heated, self.steps_per_output * self.dt)
+        n_pairs, n_wall = mean_contacts(ex, self.wall_heated, self.steps_per_output * self.dt,
+                                        self.substeps)
         row = {"T": ex.T, "Q": ex.Q, "position": state.position,
                "n_pairs": n_pairs, "n_wall": n_wall,
                "mechanics": self.mechanics(state)}

@@ -318,7 +318,8 @@ class MovingBed(DEMMotion):
 
     def observe(self, state) -> dict:
         ex = state.extra
-        n_pairs, n_wall = mean_contacts(ex, self.wall_heated, self.steps_per_output * self.dt)
+        n_pairs, n_wall = mean_contacts(ex, self.wall_heated, self.steps_per_output * self.dt,
+                                        self.substeps)
         return {"T": ex.T, "Q": ex.Q, "position": state.position,
                 "Q_tubes": ex.Q_walls[self.geometry.tube_index],
                 "flow": {k: ex.flow[k] for k in FLOW_RECORDS},
