@@ -66,6 +66,7 @@ __all__ = [
     "PEC",
     "CellGrid",
     "make_displacement",
+    "minimum_image",
     "NeighborSetup",
     "make_neighbor_setup",
     "DENSE_FRACTION",

@@ -58,6 +58,7 @@ from drumheat import assemble
 from drumheat.geometry.hopper import HopperGeometry, hopper_walls  # noqa: F401 (re-exported)
 from drumheat.geometry.walls import Plane
 from drumheat.mechanics import make_dem
+from drumheat.mechanics.neighbors import minimum_image
 from drumheat.models.moving_bed import BETA_HOPPER, lmtd
 from drumheat.motion.base import register
 from drumheat.motion.dem_common import DEMMotion
@@ -223,7 +224,7 @@ class MovingBed(DEMMotion):
             pos = state.position
             ex = state.extra
             d = sites[:, None, :] - pos[None, :, :]
-            dz = d[..., 2] - L * jnp.round(d[..., 2] / L)
+            dz = minimum_image(d[..., 2], L)
             dist = jnp.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2 + dz**2) - radius[None, :]
             dist = jnp.where(out[None, :], jnp.inf, dist)
             clearance = jnp.min(dist, axis=1)  # (K,)

@@ -95,6 +95,7 @@ import numpy as np
 from drumheat import assemble
 from drumheat.materials import gas as gas_lib
 from drumheat.mechanics import make_dem
+from drumheat.mechanics.neighbors import minimum_image
 from drumheat.models import drag as drag_model
 from drumheat.models import moving_bed
 from drumheat.motion.base import register
@@ -458,7 +459,7 @@ class PneumaticChannel(DEMMotion):
                               u[:, 1] * D], axis=1)
             p64 = pos.astype(f64)
             dd = cand[:, None, :] - p64[None, :, :]
-            dz = dd[..., 2] - D * jnp.round(dd[..., 2] / D)
+            dz = minimum_image(dd[..., 2], D)
             dist = jnp.sqrt(dd[..., 0] ** 2 + dd[..., 1] ** 2 + dz**2) - (r[None, :] + rj)
             clear = jnp.min(jnp.where(act[None, :], dist, jnp.inf), axis=1)
             best = jnp.argmax(clear)
