@@ -3,7 +3,8 @@
 A chunk advanced in place keeps nothing of the state it started from, its cleared accumulators
 included; the switch to the cyclic replay frees the coupled DEM's mechanics before it assembles
 the replay, keeping the temperatures, the heat account and the thermal parameters; and a run
-fixes glibc's mmap threshold, so that freed large buffers go back to the system.
+fixes glibc's mmap threshold, so that freed large buffers go back to the system, and gives the
+heap's freed pages back after each compilation.
 """
 
 import ctypes
@@ -119,3 +120,61 @@ def _mapped_mib(fix: bool) -> float:
 def test_freed_large_buffers_go_back_to_the_system():
     assert _mapped_mib(fix=False) == 0  # from the heap, which keeps it when it is freed
     assert _mapped_mib(fix=True) >= 2  # a mapping of its own, unmapped when it is freed
+
+
+@pytest.mark.skipif(not (sys.platform.startswith("linux") and _glibc("malloc_trim")),
+                    reason="glibc only")
+def test_the_heap_goes_back_after_each_compilation_within_a_run(monkeypatch):
+    """JAX tells of each compilation by the event the block listens to (a renamed event would
+    leave the heap unreturned silently): inside the block a new program is followed by a
+    :func:`give_back_free_heap`, outside it none is, and blocks nest."""
+    calls = []
+    monkeypatch.setattr(host_memory, "give_back_free_heap", lambda: calls.append(1) or True)
+    x = np.arange(3.0)
+    with host_memory.free_heap_after_compiles() as on:
+        assert on
+        with host_memory.free_heap_after_compiles():
+            jax.jit(lambda v: v * 3.0 + 1.0)(x)  # a new function: compiled (or loaded)
+        inner = len(calls)
+        jax.jit(lambda v: v * 5.0 - 2.0)(x)
+        assert inner >= 1 and len(calls) > inner
+    done = len(calls)
+    jax.jit(lambda v: v * 7.0 + 4.0)(x)
+    assert len(calls) == done
+
+
+def _anon_given_back_mib() -> float:
+    """MiB of anonymous resident memory that :func:`give_back_free_heap` gives back in a fresh
+    process after 64 MiB of 64 KiB blocks (below the mmap threshold: from the heap) of which
+    every other one was freed: holes inside the heap, which glibc keeps resident by itself."""
+    import subprocess
+
+    code = (
+        "import ctypes\n"
+        "from drumheat.runner.host_memory import give_back_free_heap, return_large_buffers\n"
+        "def anon():\n"
+        "    for line in open('/proc/self/status'):\n"
+        "        if line.startswith('RssAnon:'):\n"
+        "            return int(line.split()[1]) / 1024\n"
+        "return_large_buffers()\n"
+        "libc = ctypes.CDLL('libc.so.6')\n"
+        "libc.malloc.restype = ctypes.c_void_p\n"
+        "libc.memset.argtypes = (ctypes.c_void_p, ctypes.c_int, ctypes.c_size_t)\n"
+        "libc.free.argtypes = (ctypes.c_void_p,)\n"
+        "blocks = [libc.malloc(1 << 16) for _ in range(1024)]\n"
+        "for b in blocks:\n"
+        "    libc.memset(b, 1, 1 << 16)\n"
+        "for b in blocks[::2]:\n"
+        "    libc.free(b)\n"
+        "before = anon()\n"
+        "assert give_back_free_heap()\n"
+        "print(before - anon())\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(not (sys.platform.startswith("linux") and _glibc("malloc_trim")),
+                    reason="glibc only")
+def test_the_freed_heap_goes_back_to_the_system():
+    assert _anon_given_back_mib() > 24  # of the 32 MiB freed inside the heap

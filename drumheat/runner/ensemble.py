@@ -58,7 +58,7 @@ import pandas as pd
 from drumheat.motion import AbstractMotion, make_motion
 from drumheat.results.result import make_result
 from drumheat.runner.compile_cache import enable_compilation_cache
-from drumheat.runner.host_memory import return_large_buffers
+from drumheat.runner.host_memory import free_heap_after_compiles, return_large_buffers
 from drumheat.runner.loop import MAX_REDO, output_flags, run
 from drumheat.runner.progress import SimProgress
 from drumheat.runner.sharding import (make_mesh, pad_to_multiple, resolve_devices, shard_batch,
@@ -230,6 +230,7 @@ def _refuse(what: str, detail: str, variants: list[dict], scene_name: str):
         "separately with drumheat.run", scene_name)
 
 
+@free_heap_after_compiles()
 def run_ensemble(scene: Scene | str, overrides, *, devices=None, progress: bool | None = True
                  ) -> EnsembleResult:
     """Run many variants of a scene; vmapped into one program where the motion model allows.

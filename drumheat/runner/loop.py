@@ -31,7 +31,7 @@ from drumheat.results.files import CHECKPOINT, RunFolder, check_out_dir
 from drumheat.results.result import Result, make_result
 from drumheat.runner.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from drumheat.runner.compile_cache import enable_compilation_cache
-from drumheat.runner.host_memory import return_large_buffers
+from drumheat.runner.host_memory import free_heap_after_compiles, return_large_buffers
 from drumheat.runner.progress import SimProgress
 from drumheat.runner.sharding import make_mesh, resolve_devices, shard_particles
 from drumheat.runner.spill import StartSpill, copy_leaves
@@ -378,6 +378,7 @@ def trace(motion: AbstractMotion, params: dict | None = None) -> tuple:
     return T, Q
 
 
+@free_heap_after_compiles()
 def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None = True,
         params: dict | None = None, overrides: dict | None = None, devices=None,
         resume: bool = False, allow_long: bool = False, figure_formats=("png",),
@@ -387,8 +388,9 @@ def run(scene: Scene | str, out: str | Path | None = None, progress: bool | None
     Compiled programs are kept in JAX's persistent compilation cache
     (:mod:`drumheat.runner.compile_cache`; ``DRUMHEAT_CACHE_DIR=off`` leaves it alone), so
     running the same scene again does not compile again. On Linux with glibc, freed buffers of
-    1 MiB and more go back to the system from the first run on
-    (:mod:`drumheat.runner.host_memory`; a ``MALLOC_MMAP_THRESHOLD_`` set by the user is kept).
+    1 MiB and more go back to the system from the first run on, and so do the heap's freed pages
+    after each compilation during a run (:mod:`drumheat.runner.host_memory`; a
+    ``MALLOC_MMAP_THRESHOLD_`` set by the user is kept).
 
     Parameters
     ----------
