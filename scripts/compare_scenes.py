@@ -8,8 +8,10 @@ old code and on the new one, then compare::
     python scripts/compare_scenes.py diff /tmp/before /tmp/after
 
 ``run`` writes ``<scene>.csv`` (the time series) and ``<scene>.npz`` (particle temperatures)
-per scene; ``diff`` prints, per scene, the largest absolute difference of every time-series
-column and of the particle temperatures, and the largest relative one. The overrides below
+per scene (a scene that fails leaves ``<scene>.failed`` with its error, and ``run`` exits
+with 1); ``diff`` prints, per scene, the largest absolute difference of every time-series
+column and of the particle temperatures, and the largest relative one, lists the scenes that
+failed on either side, and exits with 1 on a difference or a failure. The overrides below
 shorten each scene to a few output intervals while keeping its code path (DEM scenes keep
 their recording and replay, the glass drums switch from coupled DEM to replay). With
 ``--folder`` each scene runs into a result folder (a temporary one), as ``drumheat run`` does:
@@ -55,11 +57,15 @@ SHORT = {
 }
 
 
-def run_all(out: Path, only: list[str] | None, folder: bool = False) -> None:
+def run_all(out: Path, only: list[str] | None, folder: bool = False) -> list[str]:
+    """Run the scenes' short variants into ``out`` (``NAME.csv``, ``NAME.npz``); a scene that
+    fails leaves ``NAME.failed`` with its error instead, which :func:`diff` reports. Returns
+    the names of the failed scenes."""
     import drumheat as dh
 
     out.mkdir(parents=True, exist_ok=True)
     names = only or sorted(dh.builtin_scenes())
+    failed = []
     for name in names:
         ov = SHORT.get(name)
         if ov is None:
@@ -74,16 +80,31 @@ def run_all(out: Path, only: list[str] | None, folder: bool = False) -> None:
                 np.savez(out / f"{name}.npz", t=res.t, T=res.T)
         except Exception as err:  # noqa: BLE001 - report and go on with the next scene
             print(f"{name}: FAILED {type(err).__name__}: {err}", flush=True)
+            (out / f"{name}.failed").write_text(f"{type(err).__name__}: {err}\n")
+            failed.append(name)
             continue
+        (out / f"{name}.failed").unlink(missing_ok=True)
         print(f"{name}: {len(res.t)} outputs, {time.perf_counter() - start:.1f} s", flush=True)
+    return failed
 
 
 def diff(a: Path, b: Path) -> int:
+    """Print each scene's largest difference between the runs in ``a`` and ``b``; a scene
+    that failed in either (``NAME.failed``) is listed as failed. Returns 0 where every scene
+    of both agrees to 1e-9 and none failed, else 1."""
     worst = 0.0
     rows = []
+    failed = {f.stem for f in (*a.glob("*.failed"), *b.glob("*.failed"))}
+    for name in sorted(failed):
+        where = [str(d) for d in (a, b) if (d / f"{name}.failed").exists()]
+        error = next((d / f"{name}.failed").read_text().strip() for d in (a, b)
+                     if (d / f"{name}.failed").exists())
+        rows.append((name, f"FAILED in {' and '.join(where)}", "", f" ({error[:120]})"))
     for fa in sorted(a.glob("*.csv")):
         fb = b / fa.name
         name = fa.stem
+        if name in failed:
+            continue
         if not fb.exists():
             rows.append((name, "missing in " + str(b), "", ""))
             continue
@@ -116,7 +137,7 @@ def diff(a: Path, b: Path) -> int:
           "particles")
     for r in rows:
         print(f"{r[0]:<{width}}  {r[1]:<45}  {r[2]}{r[3]}")
-    return 0 if worst < 1e-9 else 1
+    return 0 if worst < 1e-9 and not failed else 1
 
 
 def main(argv=None) -> int:
@@ -132,8 +153,7 @@ def main(argv=None) -> int:
     d.add_argument("b", type=Path)
     args = p.parse_args(argv)
     if args.cmd == "run":
-        run_all(args.out, args.only, args.folder)
-        return 0
+        return 1 if run_all(args.out, args.only, args.folder) else 0
     return diff(args.a, args.b)
 
 

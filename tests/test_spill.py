@@ -52,10 +52,29 @@ def test_a_saved_state_reads_back_as_it_was(tmp_path):
     assert not any((tmp_path / "log").iterdir())
 
 
-def test_only_strongly_typed_arrays_are_spilled(tmp_path):
+def test_a_weakly_typed_leaf_stays_in_memory_weakly_typed(tmp_path):
+    """A weakly typed scalar (Schluender's coefficients in the state of herz-sectional-drum's
+    heat model) has no file; it comes back weakly typed with its value, also after the chunk
+    donated (deleted) the state's own."""
     spill = StartSpill(tmp_path)
-    with pytest.raises(TypeError, match="strongly typed"):
-        spill.save({"t": jnp.asarray(1.0)})  # a weakly typed scalar (from a Python float)
+    weak = jnp.asarray(2.5) * 3.0  # weakly typed: from Python numbers
+    tree = {"alpha": weak, "x": jnp.arange(6.0)}
+    assert weak.weak_type
+    spill.save(tree)
+    weak.delete()  # as the chunk's donation does
+    back = spill.load()
+    assert back["alpha"].weak_type and float(back["alpha"]) == 7.5
+    assert not back["x"].weak_type
+    np.testing.assert_array_equal(back["x"], np.arange(6.0))
+    assert sorted(p.name for p in spill.path.iterdir()) == ["1.npy"]  # x alone
+    again = spill.load()  # a copy each time: a redo may donate the one it was given
+    assert again["alpha"] is not back["alpha"] and again["alpha"].weak_type
+
+
+def test_only_jax_arrays_are_spilled(tmp_path):
+    spill = StartSpill(tmp_path)
+    with pytest.raises(TypeError, match="JAX arrays"):
+        spill.save({"t": np.ones(3)})
     with pytest.raises(RuntimeError, match="no state"):
         spill.load()
 

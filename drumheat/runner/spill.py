@@ -69,20 +69,32 @@ class StartSpill:
         self.folder.mkdir(parents=True, exist_ok=True)
         self.path = self.folder / SPILL_DIR
         self._treedef = None
+        self._kept: dict = {}  # leaf index -> the weakly typed leaves of the state, in memory
         self._own: list = []  # weak references to the arrays of the last chunk's end
 
     def save(self, state) -> None:
-        """Write ``state`` (a PyTree of arrays) to the folder, one ``.npy`` file per leaf (no
+        """Write ``state`` (a PyTree of JAX arrays) to the folder, one ``.npy`` file per leaf (no
         second copy of the whole state in memory: on the CPU the arrays are written from their
-        own buffers)."""
+        own buffers).
+
+        A weakly typed leaf (a scalar computed with ``jnp`` from Python numbers, such as a
+        heat-transfer coefficient of Schluender's model) is kept in memory instead, as a copy
+        of its own, weakly typed as it was: a file has no weak type, and a strongly typed leaf
+        would change how the programs that read it promote their dtypes (and so compile them
+        anew)."""
         leaves, treedef = jax.tree_util.tree_flatten(state)
         for x in leaves:
-            if not isinstance(x, jax.Array) or x.weak_type:
-                raise TypeError("a state kept on disk must consist of strongly typed arrays; "
-                                f"got {type(x).__name__}")
+            if not isinstance(x, jax.Array):
+                raise TypeError("a state kept on disk must consist of JAX arrays; got "
+                                f"{type(x).__name__}")
         self.path.mkdir(exist_ok=True)
+        kept = {}
         for k, x in enumerate(leaves):
-            np.save(self.path / f"{k}.npy", np.asarray(x), allow_pickle=False)
+            if x.weak_type:
+                kept[k] = own_copy(x)  # before the chunk donates `x`
+            else:
+                np.save(self.path / f"{k}.npy", np.asarray(x), allow_pickle=False)
+        self._kept = kept
         self._treedef = treedef
 
     def load(self):
@@ -90,10 +102,12 @@ class StartSpill:
 
         The files are read one at a time, each into memory and from there into its new buffer,
         so that besides the state only one array is read at a time (mapping the files instead,
-        all of their pages stayed resident until the last was copied)."""
+        all of their pages stayed resident until the last was copied). The weakly typed leaves
+        kept in memory are copied again (a redo may donate what it is given)."""
         if self._treedef is None:
             raise RuntimeError("no state has been saved")
-        leaves = [own_copy(np.load(self.path / f"{k}.npy", allow_pickle=False))
+        leaves = [own_copy(self._kept[k]) if k in self._kept
+                  else own_copy(np.load(self.path / f"{k}.npy", allow_pickle=False))
                   for k in range(self._treedef.num_leaves)]
         return jax.tree_util.tree_unflatten(self._treedef, leaves)
 
@@ -115,4 +129,5 @@ class StartSpill:
         """Remove the files."""
         shutil.rmtree(self.path, ignore_errors=True)
         self._treedef = None
+        self._kept = {}
         self._own = []
