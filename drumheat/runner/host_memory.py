@@ -127,9 +127,10 @@ def free_heap_after_compiles():
     resident for the rest of the run.
 
     Yields whether it is in effect (glibc only; elsewhere it does nothing). Blocks may nest
-    and may be open in several threads; outside them JAX's compilations are left alone. The
-    listener it registers with ``jax.monitoring`` (once per process) stays registered and does
-    nothing while no block is open.
+    and may be open in several threads; while one is open, a compilation in any thread is
+    followed by the give-back (the heap is the process's), and while none is, JAX's
+    compilations are left alone. The listener it registers with ``jax.monitoring`` (once per
+    process) stays registered and does nothing while no block is open.
     """
     global _active
     on = _listen()
