@@ -23,11 +23,14 @@ not a measure here.)
 The runs keep the process's allocator as a user's run has it: :func:`drumheat.run` fixes
 glibc's mmap threshold at 1 MiB (:mod:`drumheat.runner.host_memory`), so that freed large
 buffers go back to the system, and gives the heap's freed pages back after each compilation.
+``--malloc-threshold BYTES`` sets ``MALLOC_MMAP_THRESHOLD_`` instead (earlier versions of this
+script set 1 MiB for every run, which measured code that kept glibc's dynamic threshold as if
+it did not).
+
 A run compiles the programs that JAX's persistent compilation cache does not hold, and the
 compiler's peak then lies in the phase that compiles: ``DRUMHEAT_CACHE_DIR=EMPTY_FOLDER``
-measures a user's first run of the scene, a second run with the same folder the runs after it. ``--malloc-threshold BYTES`` sets ``MALLOC_MMAP_THRESHOLD_``
-instead (earlier versions of this script set 1 MiB for every run, which measured code that kept
-glibc's dynamic threshold as if it did not).
+measures a user's first run of the scene, a second run with the same folder the runs after
+it.
 
 With ``--record-interval`` (the scene's is 0.05 s) a short run records as many intervals as a
 long one (``--record-interval 0.002 --duration 0.5 --replay-after 0.4``: 200 intervals, as the

@@ -94,12 +94,13 @@ def diff(a: Path, b: Path) -> int:
     of both agrees to 1e-9 and none failed, else 1."""
     worst = 0.0
     rows = []
-    failed = {f.stem for f in (*a.glob("*.failed"), *b.glob("*.failed"))}
-    for name in sorted(failed):
-        where = [str(d) for d in (a, b) if (d / f"{name}.failed").exists()]
-        error = next((d / f"{name}.failed").read_text().strip() for d in (a, b)
-                     if (d / f"{name}.failed").exists())
-        rows.append((name, f"FAILED in {' and '.join(where)}", "", f" ({error[:120]})"))
+    failed: dict[str, list[tuple[Path, str]]] = {}  # scene -> (folder, error) where it failed
+    for d in (a, b):
+        for f in sorted(d.glob("*.failed")):
+            failed.setdefault(f.stem, []).append((d, f.read_text().strip()))
+    for name, where in sorted(failed.items()):
+        rows.append((name, f"FAILED in {' and '.join(str(d) for d, _ in where)}", "",
+                     f" ({where[0][1][:120]})"))
     for fa in sorted(a.glob("*.csv")):
         fb = b / fa.name
         name = fa.stem

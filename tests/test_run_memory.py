@@ -122,8 +122,12 @@ def test_freed_large_buffers_go_back_to_the_system():
     assert _mapped_mib(fix=True) >= 2  # a mapping of its own, unmapped when it is freed
 
 
-@pytest.mark.skipif(not (sys.platform.startswith("linux") and _glibc("malloc_trim")),
-                    reason="glibc only")
+#: glibc's malloc_trim gives the freed heap back; elsewhere the block does nothing
+glibc_only = pytest.mark.skipif(not (sys.platform.startswith("linux") and _glibc("malloc_trim")),
+                                reason="glibc only")
+
+
+@glibc_only
 def test_the_heap_goes_back_after_each_compilation_within_a_run(monkeypatch):
     """JAX tells of each compilation by the event the block listens to (a renamed event would
     leave the heap unreturned silently): inside the block a new program is followed by a
@@ -174,7 +178,6 @@ def _anon_given_back_mib() -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.skipif(not (sys.platform.startswith("linux") and _glibc("malloc_trim")),
-                    reason="glibc only")
+@glibc_only
 def test_the_freed_heap_goes_back_to_the_system():
     assert _anon_given_back_mib() > 24  # of the 32 MiB freed inside the heap
